@@ -1,0 +1,122 @@
+"""The `jaxcal` command line: a thin layer over the library.
+
+Each subcommand lives in its own module `jaxcal/_cli_<name>.py` exposing
+`register(subparsers)`, which adds its parser and sets `func`. Output is a readable
+table by default and one JSON object with `--json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import os
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main", "add_robot_argument", "format_table", "print_json"]
+
+# Subcommand modules, in the order `jaxcal --help` lists them.
+_COMMANDS = ("simulate",)
+
+
+def add_robot_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--robot",
+        default="fanuc_m900ib700",
+        metavar="FILE|NAME",
+        help="robot JSON file or built-in preset name (default: fanuc_m900ib700)",
+    )
+
+
+def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A plain-text table with right-aligned numbers and left-aligned text."""
+    cells = [[str(h) for h in headers]] + [[_cell(v) for v in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(headers))]
+    numeric = [all(_is_num(r[i]) for r in rows) if rows else False for i in range(len(headers))]
+
+    def fmt(r):
+        return "  ".join(
+            c.rjust(w) if num else c.ljust(w) for c, w, num in zip(r, widths, numeric, strict=True)
+        ).rstrip()
+
+    lines = [fmt(cells[0]), "  ".join("-" * w for w in widths)]
+    lines += [fmt(r) for r in cells[1:]]
+    return "\n".join(lines)
+
+
+def _is_num(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _cell(v: object) -> str:
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        return f"{v:.6g}"
+    return str(v)
+
+
+def _jsonable(o):
+    import numpy as np
+
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_jsonable(v) for v in o]
+    if hasattr(o, "tolist"):
+        return _jsonable(np.asarray(o).tolist())
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def print_json(obj) -> None:
+    print(json.dumps(_jsonable(obj), indent=2))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="jaxcal",
+        description=(
+            "Elastostatic calibration of heavy quasi-serial robots (active parallelogram, "
+            "spring gravity compensator): simulate, identify, design experiments, run "
+            "Monte-Carlo noise studies and find missing model effects. Data files follow "
+            "the CSV format with unit-carrying columns (q1_deg..q6_deg, fx_N.., mx_Nm.., "
+            "dx_mm.., optional sigma_mm, id)."
+        ),
+        epilog="Run 'jaxcal COMMAND --help' for the options of each command.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in _COMMANDS:
+        importlib.import_module(f"jaxcal._cli_{name}").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    import jax
+
+    # Identification and simulation at µm precision need float64; the CLI enables it
+    # explicitly (the library never flips global config on import).
+    jax.config.update("jax_enable_x64", True)
+    from ._io import DataError
+
+    try:
+        return int(args.func(args) or 0)
+    except (DataError, ValueError) as e:
+        print(f"jaxcal {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # The reader (e.g. `| head`) went away: not an error of ours.
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115
+        return 0
+    except KeyboardInterrupt:
+        print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Extensions of the stiffness model: physical effects that the nominal model lacks.
+
+An effect is an `eqx.Module` stored in `Robot.effects`. Its array fields are parameters
+(identified like any compliance); it may
+
+- add `n_dof` extra deflection variables ξ to the equilibrium (e.g. link bending),
+  placing rotations at kinematic sites (`jaxcal._kinematics.EXTRA_SITES`),
+- add potential energy (e.g. the springs of those extra DOFs),
+- replace the energy of the joint springs (e.g. backlash, hardening).
+
+The full equilibrium (`jaxcal._equilibrium`) minimises the total potential over
+`(θ, ξ)`, so an effect is fitted exactly like the nominal parameters. Adding an effect is
+one small subclass of `AbstractEffect`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+if TYPE_CHECKING:
+    from ._robot import Robot
+
+__all__ = ["AbstractEffect", "EffectTerms", "collect_effects"]
+
+
+class AbstractEffect(eqx.Module):
+    """Base class of a model extension. Override what the effect needs.
+
+    `n_dof` (class variable): number of extra deflection variables ξ (rad).
+    """
+
+    n_dof: ClassVar[int] = 0
+
+    def sites(self, robot: Robot, xi: Float[Array, " n"]) -> dict[str, Float[Array, 3]]:
+        """Rotation vectors (rad) at kinematic sites, from this effect's ξ."""
+        return {}
+
+    def energy(
+        self, robot: Robot, q: Float[Array, 6], theta: Float[Array, 6], xi: Float[Array, " n"]
+    ) -> Float[Array, ""]:
+        """Extra potential energy (J), e.g. the springs of ξ."""
+        return jnp.zeros((), theta.dtype)
+
+    def joint_energy(
+        self, robot: Robot, theta: Float[Array, 6], energy: Float[Array, 6]
+    ) -> Float[Array, 6]:
+        """Per-joint spring energies (J) given those so far (default ½θ²/k): return them
+        modified for joints whose spring law this effect changes."""
+        return energy
+
+    def dof_scale(self, robot: Robot) -> Float[Array, " n"]:
+        """A compliance (rad/(N·m)) per ξ, to scale Newton's residual; rough is fine."""
+        return jnp.full((self.n_dof,), 1e-6)
+
+
+class EffectTerms(NamedTuple):
+    sites: dict[str, Float[Array, 3]]
+    joint_energy: Float[Array, 6]
+    energy: Float[Array, ""]
+    scale: Float[Array, " n"]
+
+
+def collect_effects(
+    robot: Robot,
+    q: Float[Array, 6],
+    theta: Float[Array, 6],
+    xi: Float[Array, " n"] | None,
+) -> EffectTerms:
+    """Sum the contributions of `robot.effects` (and the nominal joint springs)."""
+    joint = 0.5 * theta**2 / robot.compliance
+    energy = jnp.zeros((), theta.dtype)
+    sites: dict[str, Array] = {}
+    scales = []
+    start = 0
+    for eff in robot.effects:
+        n = type(eff).n_dof
+        scales.append(jnp.asarray(eff.dof_scale(robot), theta.dtype).reshape(n))
+        if xi is None:
+            start += n
+            continue
+        x = xi[start : start + n]
+        start += n
+        for k, v in eff.sites(robot, x).items():
+            sites[k] = sites[k] + v if k in sites else v
+        energy = energy + eff.energy(robot, q, theta, x)
+        joint = eff.joint_energy(robot, theta, joint)
+    scale = jnp.concatenate(scales) if scales else jnp.zeros((0,), theta.dtype)
+    return EffectTerms(sites=sites, joint_energy=joint, energy=energy, scale=scale)
+
+
+def n_extra_dof(robot: Robot) -> int:
+    """Number of extension DOFs ξ of a robot (static)."""
+    return sum(type(e).n_dof for e in robot.effects)

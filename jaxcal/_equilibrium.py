@@ -1,0 +1,224 @@
+"""Full static equilibrium (paper eq. 17) and the measured quantity of the spec.
+
+For fixed motor angles q and an external wrench (force F at the tool point, optional
+moment M), the spring deflections θ* make the total potential stationary:
+
+    U(θ) = ½ Σ θi²/ki + ½·Kc·(s(φ2) − s0)² + g Σ m·z(θ) − F·pT(θ)  (+ model extensions)
+
+and the generalised force of M is added to the gradient. θ* is found with optimistix
+Newton; derivatives with respect to the robot parameters come from the implicit
+function theorem (optimistix `ImplicitAdjoint`), never by unrolling the iterations.
+
+A measurement is `Δp = pT(q, θ*(q, F)) − pT(q, θ*(q, 0))`: loaded minus unloaded at the
+same q (spec: "What a calibration experiment measures").
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from ._compensator import _potential as _compensator_potential
+from ._effects import collect_effects
+from ._kinematics import _vee_rotation_derivative, forward, mass_positions
+from ._robot import G, Robot
+
+__all__ = [
+    "Equilibrium",
+    "total_potential",
+    "equilibrium",
+    "deflection",
+    "solve_equilibrium",
+    "solve_deflection",
+]
+
+_MAX_STEPS = 64
+
+
+def _tolerances(dtype) -> tuple[float, float]:
+    # In rad: θ is O(1e-3); float64 resolves 1e-15 rad (≪ 1e-9 m at the tool), float32
+    # resolves ~1e-9 rad.
+    if jnp.finfo(dtype).bits >= 64:
+        return 1e-11, 1e-15
+    return 1e-5, 1e-10
+
+
+def total_potential(
+    robot: Robot,
+    q: Float[Array, 6],
+    x: Float[Array, " ndof"],
+    force: Float[Array, 3],
+) -> Float[Array, ""]:
+    """Total potential `U` (J) at the deflections `x = (θ1..θ6, extension DOFs...)`:
+    joint springs, compensator, gravity of every mass and the work of the tool force."""
+    theta, xi = x[:6], x[6:]
+    fx = collect_effects(robot, q, theta, xi)
+    pose = forward(robot, q, theta, fx.sites)
+    springs = jnp.sum(fx.joint_energy)
+    comp = _compensator_potential(robot, q[1] + theta[1])
+    z = mass_positions(robot, pose)[:, 2]
+    grav = G * jnp.sum(robot.mass_kg * z)
+    load = -jnp.dot(force, pose.p_tool)
+    return springs + comp + grav + load + fx.energy
+
+
+def _tool_pose(robot: Robot, q, x):
+    theta, xi = x[:6], x[6:]
+    fx = collect_effects(robot, q, theta, xi)
+    P = forward(robot, q, theta, fx.sites)
+    return P.p_tool, P.Rw
+
+
+def _residual(x, args):
+    robot, q, force, moment, scale = args
+    g = jax.grad(lambda y: total_potential(robot, q, y, force))(x)
+    if moment is not None:
+        # Generalised force of a moment: Qi = M·ωi with ωi the tool frame's base-frame
+        # angular velocity per unit ẋi (no potential exists for a finite rotation).
+        _, R = _tool_pose(robot, q, x)
+        JR = jax.jacfwd(lambda y: _tool_pose(robot, q, y)[1])(x)
+        Jw = jax.vmap(lambda dR: _vee_rotation_derivative(dR, R), in_axes=2, out_axes=1)(JR)
+        g = g - Jw.T @ moment
+    # Scaling by the compliances makes the residual a deflection (rad), on the scale of x,
+    # so Newton's tolerances are meaningful in both spaces.
+    return g * scale
+
+
+class Equilibrium(eqx.Module):
+    """Result of one equilibrium solve.
+
+    - `x`: deflections at equilibrium, rad: θ1..θ6 then the DOFs of model extensions.
+    - `converged`: Newton met its tolerance within its step budget.
+    - `stable`: the Hessian of the potential is positive definite there (a minimum).
+    - `steps`: Newton steps taken.
+    """
+
+    x: Float[Array, " ndof"]
+    converged: Bool[Array, ""]
+    stable: Bool[Array, ""]
+    steps: Int[Array, ""]
+
+    @property
+    def theta(self) -> Float[Array, 6]:
+        return self.x[:6]
+
+
+def _scale(robot: Robot, q) -> Float[Array, " ndof"]:
+    fx = collect_effects(robot, q, jnp.zeros(6, q.dtype), None)
+    return jnp.concatenate([robot.compliance, fx.scale]).astype(q.dtype)
+
+
+def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
+    q = jnp.asarray(q)
+    dtype = jnp.result_type(q, robot.compliance)
+    q = q.astype(dtype)
+    force = jnp.asarray(force, dtype=dtype)
+    if moment is not None:
+        moment = jnp.asarray(moment, dtype=dtype)
+    scale = _scale(robot, q)
+    rtol, atol = _tolerances(dtype)
+    # Cauchy termination (small step *and* small change of the scaled residual); the
+    # rate-based test misreads quadratic convergence to round-off as divergence.
+    solver = optx.Newton(rtol=rtol, atol=atol, cauchy_termination=True)
+    x0 = jnp.zeros(scale.shape, dtype)
+    sol = optx.root_find(
+        _residual,
+        solver,
+        x0,
+        args=(robot, q, force, moment, scale),
+        max_steps=_MAX_STEPS,
+        throw=False,
+    )
+    converged = sol.result == optx.RESULTS.successful
+    x = sol.value
+    if check_stability:
+        H = jax.jacfwd(lambda y: _residual(y, (robot, q, force, moment, jnp.ones_like(scale))))(
+            jax.lax.stop_gradient(x)
+        )
+        stable = jnp.linalg.eigvalsh(0.5 * (H + H.T))[0] > 0
+    else:
+        stable = jnp.array(True)
+    converged = converged & jnp.all(jnp.isfinite(x))
+    return Equilibrium(x=x, converged=converged, stable=stable, steps=sol.stats["num_steps"])
+
+
+def _check_shapes(q, force, moment):
+    if jnp.shape(q) != (6,):
+        raise ValueError(
+            f"q must have shape (6,) (one configuration; vmap for more), got {jnp.shape(q)}"
+        )
+    if jnp.shape(force) != (3,):
+        raise ValueError(f"force must have shape (3,), got {jnp.shape(force)}")
+    if moment is not None and jnp.shape(moment) != (3,):
+        raise ValueError(f"moment must have shape (3,) or be None, got {jnp.shape(moment)}")
+
+
+def solve_equilibrium(
+    robot: Robot,
+    q: Float[Array, 6],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+) -> Equilibrium:
+    """Solve eq. (17) for one configuration without raising: check `.converged` and
+    `.stable` (for use under `jax.vmap`, where failed samples must be reported)."""
+    _check_shapes(q, force, moment)
+    return _solve(robot, q, force, moment, check_stability=True)
+
+
+@eqx.filter_jit
+def equilibrium(
+    robot: Robot,
+    q: Float[Array, 6],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+) -> Float[Array, " ndof"]:
+    """Spring deflections θ* (rad) at static equilibrium under gravity and the tool load.
+
+    **Arguments**: `q` motor angles (rad), `force` at the tool point (N, base frame),
+    optional `moment` (N·m, base frame).
+
+    Raises (via `eqx.error_if`) if Newton does not converge or the equilibrium is not
+    a minimum of the potential; use `solve_equilibrium` to get flags instead.
+    """
+    eq = solve_equilibrium(robot, q, force, moment)
+    x = eqx.error_if(eq.x, ~eq.converged, "static equilibrium did not converge")
+    return eqx.error_if(x, ~eq.stable, "static equilibrium is not stable (Hessian not PD)")
+
+
+def solve_deflection(
+    robot: Robot,
+    q: Float[Array, 6],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+) -> tuple[Float[Array, 3], Bool[Array, ""]]:
+    """Measured deflection `Δp` (m, base frame) and a flag that both solves converged.
+
+    Loaded minus unloaded (gravity-only) equilibrium at the same motor angles q. Does not
+    raise; differentiable in `robot` by the implicit function theorem.
+    """
+    _check_shapes(q, force, moment)
+    loaded = _solve(robot, q, force, moment, check_stability=False)
+    unloaded = _solve(robot, q, jnp.zeros_like(jnp.asarray(force)), None, check_stability=False)
+    p1, _ = _tool_pose(robot, jnp.asarray(q, loaded.x.dtype), loaded.x)
+    p0, _ = _tool_pose(robot, jnp.asarray(q, unloaded.x.dtype), unloaded.x)
+    return p1 - p0, loaded.converged & unloaded.converged
+
+
+@eqx.filter_jit
+def deflection(
+    robot: Robot,
+    q: Float[Array, 6],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+) -> Float[Array, 3]:
+    """Measured deflection `Δp` (m, base frame) of the full nonlinear model for one
+    configuration: `pT(q, θ*(q, F)) − pT(q, θ*(q, 0))`.
+
+    Raises if an equilibrium solve does not converge (never a silent NaN); use
+    `solve_deflection` for a flag instead.
+    """
+    dp, ok = solve_deflection(robot, q, force, moment)
+    return eqx.error_if(dp, ~ok, "static equilibrium did not converge")
