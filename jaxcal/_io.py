@@ -255,13 +255,10 @@ def write_dataset(
     d = np.asarray(data.deflection) * 1e3 if with_d else None
     s = np.asarray(data.sigma) * 1e3
     with contextlib.ExitStack() as stack:
-        fh = (
-            path
-            if hasattr(path, "write")
-            else stack.enter_context(
-                Path(path).open("w", newline="")  # type: ignore[arg-type]
-            )
-        )
+        if isinstance(path, str | Path):
+            fh: TextIO = stack.enter_context(Path(path).open("w", newline=""))
+        else:
+            fh = path
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for i in range(len(data)):
