@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 if TYPE_CHECKING:
     from ._robot import Robot
 
-__all__ = ["AbstractEffect", "EffectTerms", "collect_effects"]
+__all__ = ["AbstractEffect", "EffectTerms", "collect_effects", "observe_effects"]
 
 
 class AbstractEffect(eqx.Module):
@@ -51,6 +51,13 @@ class AbstractEffect(eqx.Module):
         """Per-joint spring energies (J) given those so far (default ½θ²/k): return them
         modified for joints whose spring law this effect changes."""
         return energy
+
+    def observe(
+        self, robot: Robot, q: Float[Array, 6], force: Float[Array, 3], dp: Float[Array, 3]
+    ) -> Float[Array, 3]:
+        """The measured deflection (m) given the model's `dp` (m, base frame): an
+        observation-level effect (e.g. a rotated tracker frame). Default: unchanged."""
+        return dp
 
     def dof_scale(self, robot: Robot) -> Float[Array, " n"]:
         """A compliance (rad/(N·m)) per ξ, to scale Newton's residual; rough is fine."""
@@ -90,6 +97,15 @@ def collect_effects(
         joint = eff.joint_energy(robot, theta, joint)
     scale = jnp.concatenate(scales) if scales else jnp.zeros((0,), theta.dtype)
     return EffectTerms(sites=sites, joint_energy=joint, energy=energy, scale=scale)
+
+
+def observe_effects(
+    robot: Robot, q: Float[Array, 6], force: Float[Array, 3], dp: Float[Array, 3]
+) -> Float[Array, 3]:
+    """Apply the observation-level transforms of `robot.effects` to a deflection (m)."""
+    for eff in robot.effects:
+        dp = eff.observe(robot, q, force, dp)
+    return dp
 
 
 def n_extra_dof(robot: Robot) -> int:

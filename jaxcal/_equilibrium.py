@@ -22,7 +22,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._compensator import _potential as _compensator_potential
-from ._effects import collect_effects
+from ._effects import collect_effects, observe_effects
 from ._kinematics import _vee_rotation_derivative, forward, mass_positions
 from ._robot import G, Robot
 
@@ -194,17 +194,22 @@ def solve_deflection(
     force: Float[Array, 3],
     moment: Float[Array, 3] | None = None,
 ) -> tuple[Float[Array, 3], Bool[Array, ""]]:
-    """Measured deflection `Δp` (m, base frame) and a flag that both solves converged.
+    """Measured deflection `Δp` (m, base frame) and a flag that both solves converged to
+    stable equilibria.
 
     Loaded minus unloaded (gravity-only) equilibrium at the same motor angles q. Does not
     raise; differentiable in `robot` by the implicit function theorem.
     """
     _check_shapes(q, force, moment)
-    loaded = _solve(robot, q, force, moment, check_stability=False)
-    unloaded = _solve(robot, q, jnp.zeros_like(jnp.asarray(force)), None, check_stability=False)
+    # Stability is checked too: Newton can converge to a saddle of the potential (e.g. for
+    # absurdly compliant joints under gravity), which is no measurement a robot can give.
+    loaded = _solve(robot, q, force, moment, check_stability=True)
+    unloaded = _solve(robot, q, jnp.zeros_like(jnp.asarray(force)), None, check_stability=True)
     p1, _ = _tool_pose(robot, jnp.asarray(q, loaded.x.dtype), loaded.x)
     p0, _ = _tool_pose(robot, jnp.asarray(q, unloaded.x.dtype), unloaded.x)
-    return p1 - p0, loaded.converged & unloaded.converged
+    ok = loaded.converged & loaded.stable & unloaded.converged & unloaded.stable
+    # Observation-level effects (e.g. a rotated tracker frame) act on the measured Δp.
+    return observe_effects(robot, q, force, p1 - p0), ok
 
 
 @eqx.filter_jit
@@ -217,8 +222,8 @@ def deflection(
     """Measured deflection `Δp` (m, base frame) of the full nonlinear model for one
     configuration: `pT(q, θ*(q, F)) − pT(q, θ*(q, 0))`.
 
-    Raises if an equilibrium solve does not converge (never a silent NaN); use
-    `solve_deflection` for a flag instead.
+    Raises if an equilibrium solve does not converge to a stable equilibrium (never a
+    silent NaN); use `solve_deflection` for a flag instead.
     """
     dp, ok = solve_deflection(robot, q, force, moment)
-    return eqx.error_if(dp, ~ok, "static equilibrium did not converge")
+    return eqx.error_if(dp, ~ok, "static equilibrium did not converge or is not stable")

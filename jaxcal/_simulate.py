@@ -17,7 +17,8 @@ __all__ = ["model_deflections", "simulate", "DeflectionError"]
 
 
 class DeflectionError(RuntimeError):
-    """The static equilibrium did not converge for some rows (named in the message)."""
+    """The static equilibrium did not converge, or converged to an unstable point, for some
+    rows (named in the message)."""
 
 
 @eqx.filter_jit
@@ -42,7 +43,8 @@ def model_deflections(
     bad = np.flatnonzero(~np.asarray(ok))
     if bad.size:
         raise DeflectionError(
-            f"static equilibrium did not converge for row(s) {', '.join(str(i + 1) for i in bad)}"
+            "static equilibrium did not converge (or is not stable) for row(s) "
+            f"{', '.join(str(i + 1) for i in bad)}"
         )
     return dp
 
