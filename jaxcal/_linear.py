@@ -79,8 +79,10 @@ def cartesian_compliance(
     """
     q = jnp.asarray(q, robot.compliance.dtype)
     force = jnp.zeros(3, q.dtype) if force is None else jnp.asarray(force, q.dtype)
-    eq = _solve(robot, q, force, None, check_stability=False)
+    eq = _solve(robot, q, force, None, check_stability=True)
     x = eqx.error_if(eq.x, ~eq.converged, "static equilibrium did not converge")
+    # An unstable point has an indefinite Hessian: no compliance exists (and Cholesky fails).
+    x = eqx.error_if(x, ~eq.stable, "static equilibrium is not stable (Hessian not PD)")
     ones = jnp.ones_like(_scale(robot, q))
     H = jax.jacfwd(lambda y: _residual(y, (robot, q, force, None, ones)))(x)
     H = 0.5 * (H + H.T)
