@@ -10,6 +10,14 @@ Identification and µm-level simulation need float64:
 global configuration by itself).
 """
 
+from ._candidates import Backlash as Backlash
+from ._candidates import Candidate as Candidate
+from ._candidates import CompensatorSpring as CompensatorSpring
+from ._candidates import JointNonlinearity as JointNonlinearity
+from ._candidates import LinkBending as LinkBending
+from ._candidates import ToolCompliance as ToolCompliance
+from ._candidates import TrackerRotation as TrackerRotation
+from ._candidates import default_candidates as default_candidates
 from ._compensator import (
     compensator_force as compensator_force,
 )
@@ -31,6 +39,22 @@ from ._compensator import (
 from ._compensator import (
     spring_length as spring_length,
 )
+from ._constraints import (
+    constraint_values as constraint_values,
+)
+from ._constraints import design_bounds as design_bounds
+from ._constraints import design_loads as design_loads
+from ._criteria import DesignCriteria as DesignCriteria
+from ._criteria import design_criteria as design_criteria
+from ._criteria import design_observation as design_observation
+from ._design import Design as Design
+from ._design import DesignProblem as DesignProblem
+from ._design import design_objective as design_objective
+from ._design import optimise_design as optimise_design
+from ._discrepancy import CandidateResult as CandidateResult
+from ._discrepancy import DiscoveryReport as DiscoveryReport
+from ._discrepancy import discover as discover
+from ._discrepancy import discover_batch as discover_batch
 from ._effects import AbstractEffect as AbstractEffect
 from ._equilibrium import (
     Equilibrium as Equilibrium,
@@ -49,6 +73,24 @@ from ._equilibrium import (
 )
 from ._equilibrium import (
     total_potential as total_potential,
+)
+from ._identification import (
+    IdentificationResult as IdentificationResult,
+)
+from ._identification import (
+    fit_linear as fit_linear,
+)
+from ._identification import (
+    fit_nonlinear as fit_nonlinear,
+)
+from ._identification import (
+    linear_system as linear_system,
+)
+from ._identification import (
+    solve_linear as solve_linear,
+)
+from ._identify import (
+    identify as identify,
 )
 from ._io import (
     DataError as DataError,
@@ -95,6 +137,19 @@ from ._linear import (
 from ._linear import (
     linear_deflection as linear_deflection,
 )
+from ._lsq import (
+    LsqFit as LsqFit,
+)
+from ._lsq import (
+    nonlinear_fit as nonlinear_fit,
+)
+from ._mc_plots import plot_error_vs_noise as plot_error_vs_noise
+from ._mc_plots import plot_histograms as plot_histograms
+from ._mc_stats import MonteCarloResult as MonteCarloResult
+from ._mc_sweeps import load_sweep as load_sweep
+from ._mc_sweeps import noise_sweep as noise_sweep
+from ._montecarlo import monte_carlo as monte_carlo
+from ._montecarlo import trial_noise as trial_noise
 from ._observation import (
     observation_aggregated as observation_aggregated,
 )
@@ -119,6 +174,10 @@ from ._parameters import (
 from ._parameters import (
     set_parameters as set_parameters,
 )
+from ._plans import feasible_q3_range as feasible_q3_range
+from ._plans import paper_table5_plan as paper_table5_plan
+from ._plans import random_designs as random_designs
+from ._plans import structured_design as structured_design
 from ._robot import (
     PRESETS as PRESETS,
 )
@@ -145,6 +204,16 @@ from ._simulate import (
 )
 from ._simulate import (
     simulate as simulate,
+)
+from ._supermodel import SuperModel as SuperModel
+from ._two_step import (
+    fit_two_step as fit_two_step,
+)
+from ._two_step import (
+    solve_two_step as solve_two_step,
+)
+from ._two_step import (
+    two_step_system as two_step_system,
 )
 
 __version__ = "0.1.0"

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 __all__ = ["main", "add_robot_argument", "format_table", "print_json"]
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
-_COMMANDS = ("simulate",)
+_COMMANDS = ("demo", "simulate", "identify", "montecarlo", "design", "discover")
 
 
 def add_robot_argument(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,459 @@
+"""Identification of the elastostatic parameters with uncertainties: the result type and
+the pure, vmappable fitting cores of the `linear` and `nonlinear` methods (the
+`two-step` method is in `_two_step.py`, the host-side entry `identify` in `_identify.py`).
+
+Every core handles one data set and never raises on values: batch Monte-Carlo draws
+with `jax.vmap` over the deflections,
+
+```python
+D = ...                                             # (draws, n, 3) m
+res = jax.vmap(lambda d: fit_nonlinear(robot, data.with_deflection(d)))(D)
+res.estimate                                        # (draws, p) user units
+res.converged                                       # (draws,) failed draws are False
+```
+
+Parameter vectors are in user units (µrad/(N·m), N/m, m; `jaxcal.get_parameters`
+order) and names carry their units (`k1_urad_per_Nm`, `Kc_N_per_m`, `s0_m`).
+Covariances are `(JᵀWJ)⁻¹` with the *stated* σ of each row (not rescaled by χ²).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ._compensator import compensator_stiffness
+from ._equilibrium import _residual, _solve, _tool_pose
+from ._io import Dataset
+from ._lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
+from ._observation import observation_linear
+from ._parameters import get_parameters, parameter_units, set_parameters
+from ._robot import URAD, Robot
+
+__all__ = [
+    "IdentificationResult",
+    "fit_linear",
+    "fit_nonlinear",
+    "linear_system",
+    "solve_linear",
+    "LinearSystem",
+    "full_model_predictor",
+    "free_mask",
+    "make_result",
+]
+
+Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+
+
+class IdentificationResult(eqx.Module):
+    """Estimates with uncertainties and fit statistics of one identification.
+
+    Arrays (a leading batch axis under `jax.vmap`):
+
+    - `estimate` `(p,)`: fitted parameters, user units, in the order of `names`.
+    - `covariance` `(p, p)`, `std` `(p,)`, `ci95` `(p, 2)` (estimate ± 1.96 std), from
+      the stated σ (NaN if the design is rank deficient).
+    - `residuals` `(n, 3)`: measured − model deflection, m, base frame.
+    - `standardized` `(n, 3)`: residuals / σ of the row.
+    - `rms` (m) over all coordinates; `chi2_red` = Σ standardized² / `dof`.
+    - `converged`: solver success, finite model, well-posed design.
+    - `steps`: solver steps (0 for the closed-form methods).
+    - `fixed_values` `(k,)`: values of the parameters held fixed, user units.
+
+    Static: `method`, `names` (fitted parameters with units), `dof` (= 3n − p),
+    `fixed` (names of parameters held at the robot's value).
+    """
+
+    estimate: Float[Array, " p"]
+    covariance: Float[Array, "p p"]
+    std: Float[Array, " p"]
+    ci95: Float[Array, "p 2"]
+    residuals: Float[Array, "n 3"]
+    standardized: Float[Array, "n 3"]
+    rms: Float[Array, ""]
+    chi2_red: Float[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    fixed_values: Float[Array, " k"]
+    method: str = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+    dof: int = eqx.field(static=True)
+    fixed: tuple[str, ...] = eqx.field(static=True, default=())
+
+    # ----- host-side reporting (not traceable; for one unbatched result) -----
+
+    def outliers(self, threshold: float = 3.0) -> list[int]:
+        """0-based rows whose largest |standardized residual| exceeds `threshold`."""
+        z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
+        return [int(i) for i in np.flatnonzero(z > threshold)]
+
+    def parameter(self, name: str) -> tuple[float, float]:
+        """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""
+        full = resolve_name(name, self.names)
+        i = self.names.index(full)
+        return float(self.estimate[i]), float(self.std[i])
+
+    def to_dict(self, threshold: float = 3.0, ids: tuple[str, ...] = ()) -> dict:
+        """The JSON object of the command line: method, parameters (value, std), RMS in
+        mm, reduced χ², number of rows and outlier rows (1-based, or their ids)."""
+        est, std = np.asarray(self.estimate), np.asarray(self.std)
+        params = {
+            n: {"value": float(v), "std": float(s)}
+            for n, v, s in zip(self.names, est, std, strict=True)
+        }
+        rows = self.outliers(threshold)
+        d = {
+            "method": self.method,
+            "parameters": params,
+            "rms_mm": float(self.rms) * 1e3,
+            "chi2_red": float(self.chi2_red),
+            "n_rows": int(self.residuals.shape[0]),
+            "outliers": [ids[i] if ids and ids[i] else i + 1 for i in rows],
+        }
+        if self.fixed:
+            d["fixed"] = {
+                n: float(v) for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True)
+            }
+        if not bool(self.converged):
+            d["converged"] = False
+        return d
+
+    def table(self, truth: dict[str, float] | None = None) -> str:
+        """A readable table: parameter, estimate, std, 95 % interval, unit (and the true
+        value and the error in std units when `truth` maps names to values)."""
+        from ._cli import format_table
+
+        headers = ["parameter", "estimate", "std", "95% low", "95% high", "unit"]
+        if truth is not None:
+            headers += ["true", "error/std"]
+        rows = []
+        for i, n in enumerate(self.names):
+            v, s = float(self.estimate[i]), float(self.std[i])
+            lo, hi = (float(x) for x in self.ci95[i])
+            row: list[object] = [n.split("_")[0], v, s, lo, hi, parameter_units(n)]
+            if truth is not None:
+                t = truth.get(n, float("nan"))
+                row += [t, (v - t) / s if s > 0 else float("nan")]
+            rows.append(row)
+        for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True):
+            row = [n.split("_")[0] + " (fixed)", float(v), "-", "-", "-", parameter_units(n)]
+            if truth is not None:
+                row += [truth.get(n, float("nan")), "-"]
+            rows.append(row)
+        lines = [format_table(headers, rows), ""]
+        lines.append(
+            f"method {self.method}: {self.residuals.shape[0]} rows, RMS residual "
+            f"{float(self.rms) * 1e3:.4f} mm, reduced chi2 {float(self.chi2_red):.3f} "
+            f"(dof {self.dof})" + ("" if bool(self.converged) else "  [NOT CONVERGED]")
+        )
+        return "\n".join(lines)
+
+
+def resolve_name(name: str, names: tuple[str, ...]) -> str:
+    """Full parameter name for `name` given with or without its unit suffix."""
+    for n in names:
+        if name == n or name == n.split("_")[0]:
+            return n
+    short = ", ".join(n.split("_")[0] for n in names)
+    raise ValueError(f"unknown parameter {name!r}; expected one of {short} (or with units)")
+
+
+def free_mask(robot: Robot, free) -> tuple[bool, ...]:
+    """Normalise `free` (None, bools per physical parameter, or names) to a bool tuple
+    over `robot.parameter_names`."""
+    names = robot.parameter_names
+    if free is None:
+        return (True,) * len(names)
+    free = tuple(free)
+    if all(isinstance(f, bool | np.bool_) for f in free):
+        if len(free) != len(names):
+            raise ValueError(f"free must have {len(names)} entries ({names}), got {len(free)}")
+        return tuple(bool(f) for f in free)
+    chosen = {resolve_name(str(f), names) for f in free}
+    return tuple(n in chosen for n in names)
+
+
+def make_result(
+    method: str,
+    names_all: tuple[str, ...],
+    mask: tuple[bool, ...],
+    estimate_all: Float[Array, " P"],
+    cov_all: Float[Array, "P P"],
+    residuals: Float[Array, "n 3"],
+    sigma: Float[Array, " n"],
+    converged: Bool[Array, ""],
+    steps: Int[Array, ""] | int = 0,
+) -> IdentificationResult:
+    """Assemble an `IdentificationResult` from full-length vectors (traceable)."""
+    idx = np.flatnonzero(mask)
+    fidx = np.flatnonzero(~np.asarray(mask, bool))
+    est = estimate_all[idx]
+    cov = cov_all[np.ix_(idx, idx)]
+    std = jnp.sqrt(jnp.diag(cov))
+    z = residuals / sigma[:, None]
+    n = residuals.shape[0]
+    dof = 3 * n - len(idx)
+    return IdentificationResult(
+        estimate=est,
+        covariance=cov,
+        std=std,
+        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
+        residuals=residuals,
+        standardized=z,
+        rms=jnp.sqrt(jnp.mean(residuals**2)),
+        chi2_red=jnp.sum(z**2) / max(dof, 1),
+        converged=jnp.asarray(converged),
+        steps=jnp.asarray(steps),
+        fixed_values=estimate_all[fidx],
+        method=method,
+        names=tuple(names_all[i] for i in idx),
+        dof=dof,
+        fixed=tuple(names_all[i] for i in fidx),
+    )
+
+
+# ----------------------------------------------------------------- linear method
+
+
+class LinearSystem(eqx.Module):
+    """Everything of the `linear` method that does not depend on the measured
+    deflections (Monte-Carlo: build once with `linear_system`, then `solve_linear` per
+    draw, one matrix product each).
+
+    Model (eq. 3/5): `Δp_j = Σ_i A_ji κ_ij` with `A_j` of eq. (4) and `κ_ij = k_i`,
+    except joint 2 of a robot with compensator, whose aggregated compliance
+    `κ_2j = 1/(1/k2 + Kc·lc·l2·η(q2_j))` (eq. 10) is evaluated at the robot's (prior)
+    `Kc`, `s0` and linearised in `k2` about the prior. The method therefore estimates
+    the spring-only `k1..k6` *assuming the prior compensator*; `Kc` and `s0` are
+    reported as fixed.
+    """
+
+    factor: LinearFactor
+    p_ref: Float[Array, " P"]
+    sigma: Float[Array, " n"]
+    names: tuple[str, ...] = eqx.field(static=True)
+    mask: tuple[bool, ...] = eqx.field(static=True)
+
+
+def linear_columns(robot: Robot, data: Dataset) -> tuple[Float[Array, "n 3 6"], Array]:
+    """Columns `∂Δp/∂k_i` (m per µrad/(N·m)) and the known offset `(n, 3)` (m) of the
+    linear model, linearised in `k2` about the prior (see `LinearSystem`)."""
+    A = observation_linear(robot, data)  # (n, 3, 6), per µrad/(N·m)
+    if not robot.has_compensator:
+        return A, jnp.zeros(A.shape[:2], A.dtype)
+    k2 = robot.compliance[1] / URAD
+    c = jax.vmap(lambda q2: compensator_stiffness(robot, q2))(data.q[:, 1]) * URAD
+    kap = 1.0 / (1.0 / k2 + c)  # aggregated, µrad/(N·m)
+    d = (kap / k2) ** 2  # ∂κ2/∂k2
+    offset = A[:, :, 1] * (kap - d * k2)[:, None]
+    return A.at[:, :, 1].multiply(d[:, None]), offset
+
+
+def linear_system(robot: Robot, data: Dataset, *, free=None) -> LinearSystem:
+    """Build the noise-independent part of the `linear` method (see `LinearSystem`).
+    `free` selects among k1..k6 (Kc, s0 are always held at the robot's value)."""
+    mask = free_mask(robot, free)
+    if robot.has_compensator:
+        mask = mask[:6] + (False, False)
+    cols, offset = linear_columns(robot, data)
+    p_ref = get_parameters(robot)
+    m6 = np.asarray(mask[:6])
+    fixed_part = jnp.einsum("nij,j->ni", cols[:, :, ~m6], p_ref[:6][~m6])
+    sig = data.sigma[:, None]
+    X = (cols[:, :, m6] / sig[:, :, None]).reshape(-1, int(m6.sum()))
+    c = ((offset + fixed_part) / sig).reshape(-1)
+    return LinearSystem(linear_factor(X, c), p_ref, data.sigma, robot.parameter_names, mask)
+
+
+def solve_linear(system: LinearSystem, deflection: Float[Array, "n 3"]) -> IdentificationResult:
+    """The `linear` estimate for one set of measured deflections (m). Pure, vmappable."""
+    f = system.factor
+    b = (deflection / system.sigma[:, None]).reshape(-1)
+    k, r = linear_solve_factored(f, b)
+    idx = np.flatnonzero(system.mask)
+    P = system.p_ref.shape[0]
+    est = system.p_ref.at[idx].set(k)
+    cov = jnp.zeros((P, P), k.dtype).at[np.ix_(idx, idx)].set(f.covariance)
+    res = r.reshape(-1, 3) * system.sigma[:, None]
+    ok = f.well_posed & jnp.all(jnp.isfinite(k))
+    return make_result("linear", system.names, system.mask, est, cov, res, system.sigma, ok)
+
+
+def fit_linear(robot: Robot, data: Dataset, *, free=None) -> IdentificationResult:
+    """Weighted linear least squares, eq. (3), on the linear model (eq. 5, no gravity or
+    `H_θθ`): `solve_linear(linear_system(robot, data, free=free), data.deflection)`."""
+    if data.deflection is None:
+        raise ValueError("data has no deflections to fit")
+    return solve_linear(linear_system(robot, data, free=free), data.deflection)
+
+
+# -------------------------------------------------------------- nonlinear method
+
+
+def _unique_rows(q) -> tuple[Array, Array]:
+    """Distinct configurations and each row's index into them; identity when `q` is
+    traced (the grouping only saves unloaded solves, it never changes the result)."""
+    try:
+        qn = np.asarray(q)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return q, jnp.arange(q.shape[0])
+    u, inv = np.unique(qn, axis=0, return_inverse=True)
+    return jnp.asarray(u, q.dtype), jnp.asarray(inv.reshape(-1))
+
+
+def _has_moments(data: Dataset) -> bool:
+    try:
+        return data.has_moments
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return True
+
+
+def _stop(tree):
+    return jax.tree_util.tree_map(
+        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a, tree
+    )
+
+
+def _equilibrium_x(robot: Robot, q, force, moment):
+    """Equilibrium deflections θ* with derivatives w.r.t. the robot's parameters from
+    one Newton step on the stop-gradient root, `x* − H⁻¹ g(x*, p)`: the value is the
+    root, the first derivative is the implicit-function one, `−H⁻¹ ∂g/∂p`. Unlike the
+    optimistix adjoint, its linear solve never raises, so a trial point of the
+    optimiser where the equilibrium fails gives a flag, not an exception (essential
+    under `vmap`)."""
+    r0 = _stop(robot)
+    eq = _solve(r0, q, force, moment, check_stability=False)
+    x = jnp.where(jnp.isfinite(eq.x), eq.x, 0.0)
+    ones = jnp.ones_like(x)
+    H = jax.jacfwd(lambda y: _residual(y, (r0, q, force, moment, ones)))(x)
+    g = _residual(x, (robot, q, force, moment, ones))
+    H = 0.5 * (H + H.T)
+    # lineax's JVP rule always raises on a non-finite solve, so a failed equilibrium
+    # gets a harmless identity Hessian (the row is flagged and replaced below).
+    good = eq.converged & jnp.all(jnp.isfinite(H)) & jnp.all(jnp.isfinite(eq.x))
+    H = jnp.where(good, H, jnp.eye(H.shape[0], dtype=H.dtype))
+    g = jnp.where(good, g, 0.0)
+    # A plain LU solve of this 6×6 system: lineax's JVP of a solve inserts a runtime
+    # error check (a host callback) that, inside vmapped while loops, has been seen to
+    # stall the CPU runtime of Monte-Carlo batches.
+    dx = jnp.linalg.solve(H, g)
+    ok = good & jnp.all(jnp.isfinite(dx))
+    return x - jnp.where(jnp.isfinite(dx), dx, 0.0), ok
+
+
+#: Model value put in place of a failed equilibrium, m: far outside any real deflection,
+#: so an optimiser step into a region where the model fails is always rejected.
+_FAILED = 1.0
+
+
+def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=None):
+    """`predict(p) -> ((n, 3) deflections m, (n,) ok)`: the full equilibrium model
+    (loaded minus unloaded, eq. 17) of every row for physical parameters `p` (user
+    units), differentiable in `p` (forward mode). The unloaded equilibrium is solved
+    once per distinct configuration (`q_unique`, `inverse` from `np.unique`, found
+    here when `data.q` is concrete)."""
+    if q_unique is None or inverse is None:
+        q_unique, inverse = _unique_rows(data.q)
+    use_m = _has_moments(data)
+    zero = jnp.zeros(3, data.q.dtype)
+
+    def predict(p):
+        r = set_parameters(robot, p)
+
+        def tool(q, f, m):
+            x, ok = _equilibrium_x(r, q, f, m)
+            return _tool_pose(r, q, x)[0], ok
+
+        p1, ok1 = jax.vmap(lambda q, f, m: tool(q, f, m if use_m else None))(
+            data.q, data.force, data.moment
+        )
+        p0, ok0 = jax.vmap(lambda q: tool(q, zero, None))(q_unique)
+        ok = ok1 & ok0[inverse]
+        dp = p1 - p0[inverse]
+        return jnp.where(ok[:, None] & jnp.isfinite(dp), dp, _FAILED), ok
+
+    return predict
+
+
+def fit_nonlinear(
+    robot: Robot,
+    data: Dataset,
+    *,
+    free=None,
+    loss: str = "l2",
+    huber_delta: float = 1.5,
+    max_steps: int = 64,
+) -> IdentificationResult:
+    """All compliances plus `Kc`, `s0` fitted to the *full* equilibrium model with
+    Levenberg–Marquardt, started at the robot's values (which also hold the fixed ones).
+
+    - `free`: names or bools over `robot.parameter_names` (default all).
+    - `loss`: `"l2"` or `"huber"` (threshold `huber_delta` in σ units).
+    - `max_steps`: LM step budget.
+
+    Pure and vmappable over `data.deflection`; failures give `converged = False`.
+    """
+    q_u, inv = _unique_rows(data.q)
+    return _nonlinear_with_groups(
+        robot, data, q_u, inv, free_mask(robot, free), loss, huber_delta, max_steps
+    )
+
+
+def _to_physical(u, s0_fixed: bool, s0_ref):
+    """Internal vector `[k1..k6, Kc, Kc·s0]` → physical `[k1..k6, Kc, s0]`."""
+    s0 = s0_ref if s0_fixed else u[7] / u[6]
+    return jnp.concatenate([u[:7], jnp.reshape(s0, (1,))])
+
+
+def _nonlinear_with_groups(robot, data, q_u, inv, free, loss, huber_delta, max_steps):
+    if data.deflection is None:
+        raise ValueError("data has no deflections to fit")
+    mask = free_mask(robot, free)
+    predict = full_model_predictor(robot, data, q_u, inv)
+    p0 = get_parameters(robot)
+    if robot.has_compensator:
+        # The compensator's stiffness (eq. 10) is linear in Kc and Kc·s0, not in s0:
+        # fitting (Kc, Kc·s0) makes the model nearly linear, so LM needs few steps and
+        # the covariance's linearisation holds; s0 and its variance follow by the delta
+        # method (autodiff Jacobian of the map back).
+        s0_fixed = not mask[7]
+        to_p = lambda u: _to_physical(u, s0_fixed, p0[7])
+        u0 = p0.at[7].set(p0[6] * p0[7])
+        fit = nonlinear_fit(
+            lambda u: predict(to_p(u)),
+            u0,
+            data.deflection,
+            data.sigma,
+            free=mask,
+            loss=loss,
+            huber_delta=huber_delta,
+            max_steps=max_steps,
+        )
+        G = jax.jacfwd(to_p)(fit.estimate)
+        est, cov = to_p(fit.estimate), G @ fit.covariance @ G.T
+    else:
+        fit = nonlinear_fit(
+            predict,
+            p0,
+            data.deflection,
+            data.sigma,
+            free=mask,
+            loss=loss,
+            huber_delta=huber_delta,
+            max_steps=max_steps,
+        )
+        est, cov = fit.estimate, fit.covariance
+    return make_result(
+        "nonlinear" if loss == "l2" else "nonlinear-huber",
+        robot.parameter_names,
+        mask,
+        est,
+        0.5 * (cov + cov.T),
+        fit.residuals,
+        data.sigma,
+        fit.converged,
+        fit.steps,
+    )

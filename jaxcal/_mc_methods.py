@@ -1,0 +1,179 @@
+"""Adapters from the identification methods to the per-trial function a Monte-Carlo
+study vmaps: `fit(deflection (n, 3) m, sigma (n,) m) -> (estimate, std, ci_lo, ci_hi,
+ok)`, plus the parameter names and their true values.
+
+The identification functions of `jaxcal._identification` are used when present; they
+are pure in the deflections, so under `jax.vmap` everything that depends only on the
+design (observation matrices, factorisations) is computed once per chunk, not per
+trial.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._io import Dataset
+from ._linear import joint_stiffness
+from ._parameters import get_parameters
+from ._robot import URAD, Robot
+
+__all__ = ["TrialFit", "trial_fit", "true_values"]
+
+_AGG = re.compile(r"^k2@(-?[0-9.eE+-]+)deg_urad_per_Nm$")
+
+
+class TrialFit(NamedTuple):
+    """`fit(d, sigma, force, moment) -> (estimate, std, ci_lo, ci_hi, ok)` for one
+    trial (deflections, σ, loads traced: one compiled study serves any load level);
+    `names` and `true` values of the estimated parameters; the design's `force` and
+    `moment`; `unidentifiable()` names the parameters the design cannot determine
+    (called only when the noise-free fit fails)."""
+
+    names: tuple[str, ...]
+    true: np.ndarray
+    fit: Callable
+    unidentifiable: Callable[[], tuple[str, ...]] = lambda: ()
+    force: np.ndarray | None = None
+    moment: np.ndarray | None = None
+
+
+def null_space_names(
+    robot: Robot, design: Dataset, names: Sequence[str], rcond: float = 1e-10
+) -> tuple[str, ...]:
+    """Parameters among `names` (physical ones) that the design cannot determine: those
+    with a component above 0.1 in a null vector of the column-normalised Jacobian of the
+    full-model deflections (singular value below `rcond` of the largest)."""
+    from ._observation import observation_physical
+
+    phys = list(robot.parameter_names)
+    cols = [phys.index(n) for n in names if n in phys]
+    if not cols:
+        return ()
+    J = np.asarray(observation_physical(robot, design)).reshape(-1, len(phys))[:, cols]
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms == 0
+    Js = J / np.where(zero, 1.0, norms)
+    _, s, vt = np.linalg.svd(Js, full_matrices=True)
+    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
+    null = vt[s < rcond * max(s.max(), 1e-300)]
+    bad = zero | (np.abs(null) > 0.1).any(axis=0) if null.size else zero
+    return tuple(phys[c] for c, b in zip(cols, bad, strict=True) if b)
+
+
+def true_values(robot: Robot, design: Dataset, names: Sequence[str]) -> np.ndarray:
+    """True values of parameters named as the identification names them: physical
+    parameters from the robot; aggregated joint-2 compliances `k2@<q2>deg_urad_per_Nm`
+    as `1/K_θ2^Σ(q2)` of eq. (10) at the design's q2 value closest to `<q2>`."""
+    phys = dict(zip(robot.parameter_names, np.asarray(get_parameters(robot)), strict=True))
+    q2 = np.unique(np.asarray(design.q[:, 1]))
+    out = []
+    for n in names:
+        if n in phys:
+            out.append(float(phys[n]))
+            continue
+        m = _AGG.match(n)
+        if m is None:
+            raise ValueError(f"no true value known for parameter {n!r}")
+        target = np.deg2rad(float(m.group(1)))
+        qv = q2[np.argmin(np.abs(q2 - target))]
+        q = jnp.zeros(6).at[1].set(qv)
+        out.append(float(1.0 / joint_stiffness(robot, q)[1] / URAD))
+    return np.asarray(out, np.float64)
+
+
+def _from_result(r):
+    ci = r.ci95
+    return r.estimate, r.std, ci[:, 0], ci[:, 1], jnp.all(jnp.asarray(r.converged))
+
+
+class _LocalResult(NamedTuple):
+    names: tuple[str, ...]
+    estimate: jnp.ndarray
+    std: jnp.ndarray
+    ci95: jnp.ndarray
+    converged: jnp.ndarray
+
+
+def _local_linear(robot: Robot, data: Dataset, *, free=None) -> _LocalResult:
+    # Minimal stand-in for the identification's linear method while it is absent:
+    # weighted least squares of eq. (20) in the aggregated compliances, known σ.
+    import lineax as lx
+
+    from ._observation import observation_aggregated
+
+    if free is not None:
+        raise ValueError("free needs jaxcal._identification")
+    B, names, _ = observation_aggregated(robot, data)
+    w = 1.0 / data.sigma
+    Bw = (B * w[:, None, None]).reshape(-1, B.shape[2])
+    assert data.deflection is not None
+    dw = (data.deflection * w[:, None]).reshape(-1)
+    N = lx.MatrixLinearOperator(Bw.T @ Bw, lx.positive_semidefinite_tag)
+    x = lx.linear_solve(N, Bw.T @ dw, lx.Cholesky()).value
+    eye = jnp.eye(Bw.shape[1], dtype=Bw.dtype)
+    cov = jnp.stack([lx.linear_solve(N, e, lx.Cholesky()).value for e in eye])
+    std = jnp.sqrt(jnp.diag(cov))
+    ci = jnp.stack([x - 1.959963984540054 * std, x + 1.959963984540054 * std], axis=1)
+    return _LocalResult(names, x, std, ci, jnp.array(True))
+
+
+def trial_fit(
+    robot: Robot,
+    design: Dataset,
+    method: str,
+    clean,
+    *,
+    free: Sequence[str] | None = None,
+) -> TrialFit:
+    """The per-trial identification of `method` for `design` (deflections replaced per
+    trial). Checks identifiability once, on the design, so a bad design fails before any
+    trial runs (the identification names the unidentifiable parameters)."""
+    try:
+        from . import _identification as ident
+    except ImportError:
+        ident = None
+    if ident is None and method == "linear":
+        base = _local_linear
+    elif ident is None:
+        raise ValueError(f"method {method!r} needs jaxcal._identification")
+    kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
+    if ident is None:
+        pass
+    elif method == "linear":
+        base = ident.fit_linear
+    elif method == "two-step":
+        from ._two_step import fit_two_step
+
+        base = fit_two_step
+    elif method == "nonlinear":
+        base = ident.fit_nonlinear
+    else:
+        raise ValueError(f"unknown method {method!r}")
+
+    # A host (numpy) copy of q: under `jit` closed-over jax arrays become tracers, and
+    # the identification groups rows by q2 on the host. Loads may be traced.
+    q, f, m = (np.asarray(a) for a in (design.q, design.force, design.moment))
+
+    def _data(d, sigma, force=f, moment=m) -> Dataset:
+        return Dataset(q, force, moment, d, sigma, design.ids, design.source)  # type: ignore[arg-type]
+
+    def fit(d, sigma, force, moment):
+        return _from_result(base(robot, _data(d, sigma, force, moment), **kw))
+
+    # The names are static: abstract evaluation gets them without compiling anything.
+    probe = jax.eval_shape(lambda d: base(robot, _data(d, design.sigma), **kw), clean)
+    names = tuple(probe.names)
+    return TrialFit(
+        names,
+        true_values(robot, design, names),
+        fit,
+        lambda: null_space_names(robot, design, names),
+        f,
+        m,
+    )

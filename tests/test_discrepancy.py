@@ -1,0 +1,233 @@
+"""Discrepancy workflow (issue 6): candidate effects, gap statistics, the seeds study
+(each effect hidden in 10 noise seeds must be named, effect and joint, in ≥ 9; no
+effect must give "none" in ≥ 9) and the `jaxcal discover` command."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.stats
+
+import jaxcal
+from jaxcal._candidates import (
+    THETA_REF,
+    Backlash,
+    CompensatorSpring,
+    JointNonlinearity,
+    LinkBending,
+    TrackerRotation,
+    default_candidates,
+)
+from jaxcal._discrepancy import _press, chi2_sf
+from jaxcal._robot import URAD
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _study_module():
+    spec = importlib.util.spec_from_file_location(
+        "_discrepancy_study", ROOT / "notebooks" / "_discrepancy_study.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+STUDY = _study_module()
+
+
+@pytest.fixture(scope="module")
+def example(robot, data_dir):
+    return jaxcal.read_dataset(data_dir / "example_calibration.csv", robot)
+
+
+@pytest.fixture(scope="module")
+def study(robot, example):
+    # Every case, 10 seeds each, fitted in batched calls (two compiles: the preset and
+    # the robot without compensator).
+    return STUDY.run_study(robot, example)
+
+
+# -- candidate physics (cheap, no equilibrium) ------------------------------------------
+
+
+def _torque(effect, robot, j, theta_j):
+    """Spring torque of joint j (N·m): d/dθ of the nominal ½θ²/k plus the effect."""
+
+    def energy(t):
+        theta = jnp.zeros(6).at[j - 1].set(t)
+        base = 0.5 * t**2 / robot.compliance[j - 1]
+        return base + effect.energy(robot, jnp.zeros(6), theta, jnp.zeros(0))
+
+    return jax.grad(energy)(theta_j)
+
+
+def test_backlash_is_lost_motion(robot):
+    b = 50.0  # µrad
+    eff = Backlash(1, jnp.asarray(b))
+    k = robot.compliance[0]
+    for t in (1e-3, -2e-3, 3e-3):
+        # Far outside the band (|θ|/w ≥ 10, w = 2·sqrt(b² + w0²) ≈ 100 µrad) the spring
+        # sees θ − b·sign θ: tanh and sech² differ from 1 and 0 by < 1e-8.
+        want = (t - math.copysign(b * URAD, t)) / k
+        assert float(_torque(eff, robot, 1, jnp.asarray(t))) == pytest.approx(float(want), rel=1e-6)
+    # Convex everywhere (stable Newton): the torque is increasing through the band.
+    ts = jnp.linspace(-3 * b * URAD, 3 * b * URAD, 201)
+    tau = jax.vmap(lambda t: _torque(eff, robot, 1, t))(ts)
+    assert bool(jnp.all(jnp.diff(tau) > 0))
+    # Absent at b = 0.
+    zero = Backlash(1, jnp.asarray(0.0))
+    assert float(zero.energy(robot, jnp.zeros(6), jnp.full(6, 1e-3), jnp.zeros(0))) == 0.0
+
+
+def test_joint_nonlinearity_torque_law(robot):
+    c = 0.05
+    eff = JointNonlinearity(3, jnp.asarray(c))
+    k = robot.compliance[2]
+    t = 2e-3
+    want = t / k * (1 + c * t**2 / THETA_REF**2)
+    assert float(_torque(eff, robot, 3, jnp.asarray(t))) == pytest.approx(float(want), rel=1e-12)
+
+
+def test_compensator_spring_matches_core_compensator(robot):
+    # The candidate's (Kc, Kc·s0) spring gives the torque of eq. (9) of the preset's.
+    eff = CompensatorSpring(robot.Kc, robot.Kc * robot.s0, float(robot.lc), float(robot.l2c))
+    for q2 in (-0.5, 0.1, 0.9):
+        tau = jax.grad(
+            lambda p: eff.energy(robot, jnp.zeros(6).at[1].set(p), jnp.zeros(6), jnp.zeros(0))
+        )(jnp.asarray(q2))
+        assert float(tau) == pytest.approx(float(jaxcal.compensator_torque(robot, q2)), rel=1e-10)
+
+
+def test_link_bending_and_decoy_sites(robot):
+    eff = LinkBending(3, jnp.asarray(0.1))
+    xi = jnp.array([1e-4, -2e-4])
+    site = eff.sites(robot, xi)
+    assert set(site) == {"link3"}
+    np.testing.assert_array_equal(site["link3"], [0.0, 1e-4, -2e-4])
+    assert float(eff.energy(robot, None, None, xi)) == pytest.approx(
+        0.5 * float(xi @ xi) / ((0.1 + 1e-6) * URAD)
+    )
+    with pytest.raises(ValueError, match="joint must be 2 or 3"):
+        LinkBending(4, jnp.asarray(0.1))
+    rot = TrackerRotation(jnp.array([0.0, 0.0, 1e6 * math.pi / 2]))  # 90° about z, in µrad
+    out = rot.observe(robot, None, None, jnp.array([1.0, 0.0, 0.0]))
+    np.testing.assert_allclose(out, [0.0, 1.0, 0.0], atol=1e-12)
+
+
+def test_default_candidates_depend_on_robot(robot):
+    labels = [c.label for c in default_candidates(robot)]
+    assert "compensator" not in labels  # the preset has one
+    assert {"link_bending[2]", "link_bending[3]", "tool_compliance", "tracker_rotation"} <= set(
+        labels
+    )
+    assert sum(lab.startswith("backlash[") for lab in labels) == 6
+    no_comp = STUDY.no_compensator(robot)
+    assert "compensator" in [c.label for c in default_candidates(no_comp)]
+
+
+def test_chi2_sf_matches_scipy():
+    for x, k in ((135.0, 140), (3.0, 1), (200.0, 136), (0.5, 3)):
+        assert chi2_sf(x, k) == pytest.approx(scipy.stats.chi2.sf(x, k), rel=1e-9)
+
+
+def test_press_equals_refitting_without_each_group():
+    # For a linear model PRESS is exact: compare with explicit leave-one-group-out fits.
+    rng = np.random.default_rng(3)
+    groups = np.repeat(np.arange(6), 2)  # 6 configurations of 2 rows → 36 residuals
+    J = rng.normal(size=(36, 4))
+    y = J @ rng.normal(size=4) + rng.normal(size=36)
+    beta, *_ = np.linalg.lstsq(J, y, rcond=None)
+    loo = _press(J, y - J @ beta, groups)
+    rows = np.repeat(groups, 3)
+    for g in range(6):
+        keep = rows != g
+        b, *_ = np.linalg.lstsq(J[keep], y[keep], rcond=None)
+        np.testing.assert_allclose(loo[~keep], (y - J @ b)[~keep], rtol=1e-10, atol=1e-12)
+
+
+# -- the seeds study ----------------------------------------------------------------------
+
+EFFECTS = [c for c in STUDY.CASES if c != "none"]
+
+
+@pytest.mark.parametrize("case", EFFECTS)
+def test_hidden_effect_is_named(study, case):
+    named = study[case]["named"]
+    assert sum(n == case for n in named) >= 9, named
+
+
+def test_no_effect_gives_none(study):
+    named = study["none"]["named"]
+    assert sum(n == "none" for n in named) >= 9, named
+
+
+@pytest.mark.parametrize("case", EFFECTS)
+def test_gap_closes_when_effect_added(study, case):
+    # With the right effect the residuals are noise: χ² ~ χ²(ν), so χ²_red lies within
+    # 1 ± 3·sqrt(2/ν) with probability ≈ 0.997 per seed; ≥ 9 of the correctly named seeds
+    # (all but one) inside fails by chance with probability < 1e-3 (binomial, 10 seeds).
+    reps = [
+        r for r, n in zip(study[case]["reports"], study[case]["named"], strict=True) if n == case
+    ]
+    inside = 0
+    for r in reps:
+        assert r.heldout_rms_after_mm < r.heldout_rms_before_mm
+        assert r.rms_after_mm < r.rms_before_mm
+        band = 3 * math.sqrt(2 / r.dof_after)
+        inside += abs(r.chi2_red_after - 1) <= band
+    assert inside >= len(reps) - 1
+
+
+def test_gap_is_detected_before(study):
+    # The gap statistics see every hidden effect: reduced χ² of the nominal fit far above
+    # the noise band (p-value tiny) — and not in the no-effect case.
+    for case in EFFECTS:
+        p = [r.p_value_before for r in study[case]["reports"]]
+        assert np.median(p) < 1e-3, (case, p)
+    p_none = [r.p_value_before for r in study["none"]["reports"]]
+    assert np.median(p_none) > 0.01
+
+
+# -- the command line ---------------------------------------------------------------------
+
+
+def test_cli_discover_example_answers_none(data_dir, capsys, study):
+    # (after the study: the compiled model is reused)
+    from jaxcal._cli import main
+
+    rc = main(["discover", str(data_dir / "example_calibration.csv"), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert out["effect"] == "none" and out["joint"] is None
+    assert set(out) == {
+        "effect",
+        "joint",
+        "rms_before_mm",
+        "rms_after_mm",
+        "chi2_red_before",
+        "chi2_red_after",
+        "delta_bic",
+        "heldout_rms_before_mm",
+        "heldout_rms_after_mm",
+        "candidates",
+    }
+    assert out["delta_bic"] < 10
+    assert all(
+        set(c) == {"effect", "joint", "delta_bic", "rms_after_mm"} for c in out["candidates"]
+    )
+    assert len(out["candidates"]) == len(default_candidates(jaxcal.load_robot()))
+
+
+def test_discover_rejects_float32_and_missing_deflections(robot, example):
+    with pytest.raises(ValueError, match="no deflections"):
+        jaxcal_discover = __import__("jaxcal._discrepancy", fromlist=["discover"]).discover
+        jaxcal_discover(robot, example.with_deflection(None))
