@@ -180,6 +180,8 @@ cells = [
 
 nb = nbformat.v4.new_notebook(cells=cells)
 nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(HERE)}}).execute()
+NotebookClient(
+    nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(HERE)}}
+).execute()
 nbformat.write(nb, HERE / "04_monte_carlo.ipynb")
 print("wrote", HERE / "04_monte_carlo.ipynb")
