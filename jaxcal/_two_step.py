@@ -24,8 +24,8 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
+from jax.scipy.linalg import cho_factor, cho_solve
 from jaxtyping import Array, Float
 
 from ._identification import IdentificationResult, free_mask, make_result
@@ -123,16 +123,16 @@ def _step2(sys: TwoStepSystem, theta1, cov1):
     ck = jax.lax.stop_gradient(cov1[pos[:, None], pos[None, :]])
     dk = jax.lax.stop_gradient(K / k2i)
     SK = ck * (dk[:, None] * dk[None, :])
-    op = lx.MatrixLinearOperator(SK, lx.positive_semidefinite_tag)
-    solve = lambda b: lx.linear_solve(op, b, lx.Cholesky(), throw=False).value
-    SiC = jax.vmap(solve, in_axes=1, out_axes=1)(sys.C)
+    # jax.scipy's Cholesky, not lineax: `_step2` is differentiated (delta method) and
+    # lineax's JVP rule inserts a host-callback error check whatever `throw` says; inside
+    # jit(vmap) Monte-Carlo chunks that callback deadlocked XLA's CPU runtime (two-step
+    # studies hung). A non-PD matrix gives NaN here, caught by `ok` in `solve_two_step`.
+    SiC = cho_solve(cho_factor(SK, lower=True), sys.C)
     # Column scaling keeps the 3×3 normal matrix O(1) (K ~ 1e7, Kc ~ 1e6, s0Kc ~ 1e5).
     col = jnp.sqrt(jnp.sum(sys.C * SiC, axis=0))
     N = (sys.C.T @ SiC) / (col[:, None] * col[None, :])
     rhs = (SiC.T @ K) / col
-    y = lx.linear_solve(
-        lx.MatrixLinearOperator(N, lx.positive_semidefinite_tag), rhs, lx.Cholesky(), throw=False
-    ).value
+    y = cho_solve(cho_factor(N, lower=True), rhs)
     y = y / col
     k2 = 1.0 / (y[0] * URAD)
     params = jnp.concatenate([full[:1], k2[None], full[1 + m :], jnp.stack([y[1], y[2] / y[1]])])
