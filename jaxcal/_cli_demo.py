@@ -17,34 +17,16 @@ import numpy as np
 
 from ._cli import print_json
 
-#: Paper Table 5 (deg): q1..q6 of the optimal measurement configurations.
-TABLE5 = np.array(
-    [
-        [0, 0, -30, -45, 30, 135],
-        [0, 0, -30, 45, -30, 35],
-        [90, 0, 30, -45, -30, -45],
-        [90, 0, 30, 45, -30, 45],
-        [180, 35, -30, 135, -30, -45],
-        [-180, 35, -30, -45, 30, 135],
-        [-90, 35, 30, 135, 30, 135],
-        [-90, 35, 30, -45, -30, -45],
-        [0, 120, -30, -135, 30, -135],
-        [0, 120, -30, 135, -30, -45],
-        [180, 120, 30, -135, 30, -135],
-        [-180, 120, 30, 135, 30, 135],
-    ],
-    dtype=float,
-)
-
 
 def demo_experiment(robot, horizontal_fraction: float = 0.45):
     """Table 5 with q2 − 30°, three loads each: −max_load ẑ, half of it, and a horizontal
     force `horizontal_fraction·max_load` across the arm (perpendicular to the vertical
     plane of the arm). Returns a `Dataset` without deflections."""
     from ._io import Dataset
+    from ._plans import PAPER_TABLE5_DEG
     from ._robot import G
 
-    q = TABLE5.copy()
+    q = PAPER_TABLE5_DEG.copy()
     q[:, 1] -= 30.0
     load = robot.experiment.max_load if robot.experiment is not None else 700 * G
     rows, forces = [], []

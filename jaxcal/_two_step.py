@@ -25,7 +25,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.linalg import cho_factor, cho_solve
 from jaxtyping import Array, Float
 
 from ._identification import IdentificationResult, free_mask, make_result
@@ -110,6 +109,52 @@ def two_step_system(robot: Robot, data: Dataset, *, free=None, exact: bool = Tru
     )
 
 
+def _cholesky(A: Float[Array, "n n"]) -> Float[Array, "n n"]:
+    """Lower Cholesky factor of a small SPD matrix, unrolled into plain XLA ops (the size
+    is static and small: the number of distinct q2 values, or 3)."""
+    n = A.shape[0]
+    L = jnp.zeros_like(A)
+    for j in range(n):
+        d = jnp.sqrt(A[j, j] - jnp.dot(L[j, :j], L[j, :j]))
+        L = L.at[j, j].set(d)
+        if j + 1 < n:
+            L = L.at[j + 1 :, j].set((A[j + 1 :, j] - L[j + 1 :, :j] @ L[j, :j]) / d)
+    return L
+
+
+def _cho_solve(L: Float[Array, "n n"], B: Float[Array, "n k"]) -> Float[Array, "n k"]:
+    """Solve `L Lᵀ X = B` by unrolled forward and back substitution."""
+    n = L.shape[0]
+    Y = jnp.zeros_like(B)
+    for i in range(n):
+        Y = Y.at[i].set((B[i] - L[i, :i] @ Y[:i]) / L[i, i])
+    X = jnp.zeros_like(B)
+    for i in reversed(range(n)):
+        X = X.at[i].set((Y[i] - L[i + 1 :, i] @ X[i + 1 :]) / L[i, i])
+    return X
+
+
+def _eigvalsh3(A: Float[Array, "3 3"]) -> Float[Array, 3]:
+    """Ascending eigenvalues of a symmetric 3×3 matrix in closed form (trigonometric
+    solution of the characteristic cubic), without a LAPACK call."""
+    q = jnp.trace(A) / 3.0
+    p1 = A[0, 1] ** 2 + A[0, 2] ** 2 + A[1, 2] ** 2
+    p2 = (A[0, 0] - q) ** 2 + (A[1, 1] - q) ** 2 + (A[2, 2] - q) ** 2 + 2.0 * p1
+    p = jnp.sqrt(p2 / 6.0)
+    ps = jnp.where(p > 0, p, 1.0)
+    B = (A - q * jnp.eye(3, dtype=A.dtype)) / ps
+    det = (
+        B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
+        - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
+        + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0])
+    )
+    r = jnp.clip(det / 2.0, -1.0, 1.0)
+    phi = jnp.arccos(r) / 3.0
+    e_max = q + 2.0 * p * jnp.cos(phi)
+    e_min = q + 2.0 * p * jnp.cos(phi + 2.0 * jnp.pi / 3.0)
+    return jnp.stack([e_min, 3.0 * q - e_max - e_min, e_max])
+
+
 def _step2(sys: TwoStepSystem, theta1, cov1):
     """Map the step-1 estimate (free entries) to `[k1..k6, Kc, s0]` (user units)."""
     m = sys.q2.shape[0]
@@ -123,16 +168,16 @@ def _step2(sys: TwoStepSystem, theta1, cov1):
     ck = jax.lax.stop_gradient(cov1[pos[:, None], pos[None, :]])
     dk = jax.lax.stop_gradient(K / k2i)
     SK = ck * (dk[:, None] * dk[None, :])
-    # jax.scipy's Cholesky, not lineax: `_step2` is differentiated (delta method) and
-    # lineax's JVP rule inserts a host-callback error check whatever `throw` says; inside
-    # jit(vmap) Monte-Carlo chunks that callback deadlocked XLA's CPU runtime (two-step
-    # studies hung). A non-PD matrix gives NaN here, caught by `ok` in `solve_two_step`.
-    SiC = cho_solve(cho_factor(SK, lower=True), sys.C)
+    # Small unrolled Cholesky (`_cholesky`), not lineax or LAPACK: `_step2` runs per trial
+    # inside jit(vmap) Monte-Carlo chunks, where lineax's JVP error check (a host
+    # callback) and batched LAPACK custom calls were both seen to deadlock XLA's CPU
+    # runtime. A non-PD matrix gives NaN here, caught by `ok` in `solve_two_step`.
+    SiC = _cho_solve(_cholesky(SK), sys.C)
     # Column scaling keeps the 3×3 normal matrix O(1) (K ~ 1e7, Kc ~ 1e6, s0Kc ~ 1e5).
     col = jnp.sqrt(jnp.sum(sys.C * SiC, axis=0))
     N = (sys.C.T @ SiC) / (col[:, None] * col[None, :])
     rhs = (SiC.T @ K) / col
-    y = cho_solve(cho_factor(N, lower=True), rhs)
+    y = _cho_solve(_cholesky(N), rhs[:, None])[:, 0]
     y = y / col
     k2 = 1.0 / (y[0] * URAD)
     params = jnp.concatenate([full[:1], k2[None], full[1 + m :], jnp.stack([y[1], y[2] / y[1]])])
@@ -149,7 +194,7 @@ def solve_two_step(system: TwoStepSystem, deflection: Float[Array, "n 3"]) -> Id
     G = jax.jacfwd(lambda t: _step2(system, t, cov1)[0])(theta1)
     cov = G @ cov1 @ G.T
     cov = 0.5 * (cov + cov.T)
-    lam = jnp.linalg.eigvalsh(jnp.where(jnp.isfinite(N), N, 0.0))
+    lam = _eigvalsh3(jnp.where(jnp.isfinite(N), N, 0.0))
     well2 = lam[0] > RCOND * lam[-1]
     # Residuals of the linear model at the final parameters (compensator aggregated, eq. 10).
     k = params[:6]
