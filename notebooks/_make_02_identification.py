@@ -15,7 +15,7 @@ cells = [
     ),
     (
         "code",
-        "import jax\njax.config.update(\"jax_enable_x64\", True)\n"
+        'import jax\njax.config.update("jax_enable_x64", True)\n'
         "%matplotlib inline\nimport json\nimport numpy as np\nimport matplotlib.pyplot as plt\n"
         "import jaxcal\nfrom jaxcal._identify import identify\nfrom jaxcal._cli import format_table",
     ),
