@@ -22,6 +22,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._compensator import _potential as _compensator_potential
+from ._dense import SmallLU, is_positive_definite
 from ._effects import collect_effects, observe_effects
 from ._kinematics import _vee_rotation_derivative, forward, mass_positions
 from ._robot import G, Robot
@@ -122,7 +123,9 @@ def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
     rtol, atol = _tolerances(dtype)
     # Cauchy termination (small step *and* small change of the scaled residual); the
     # rate-based test misreads quadratic convergence to round-off as divergence.
-    solver = optx.Newton(rtol=rtol, atol=atol, cauchy_termination=True)
+    # Linear algebra in plain jnp (SmallLU), not LAPACK: this solve runs vmapped, and
+    # batched LAPACK kernels can deadlock XLA's CPU thread pool (see `_dense`).
+    solver = optx.Newton(rtol=rtol, atol=atol, linear_solver=SmallLU(), cauchy_termination=True)
     x0 = jnp.zeros(scale.shape, dtype)
     sol = optx.root_find(
         _residual,
@@ -130,6 +133,7 @@ def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
         x0,
         args=(robot, q, force, moment, scale),
         max_steps=_MAX_STEPS,
+        adjoint=optx.ImplicitAdjoint(linear_solver=SmallLU()),
         throw=False,
     )
     converged = sol.result == optx.RESULTS.successful
@@ -138,7 +142,7 @@ def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
         H = jax.jacfwd(lambda y: _residual(y, (robot, q, force, moment, jnp.ones_like(scale))))(
             jax.lax.stop_gradient(x)
         )
-        stable = jnp.linalg.eigvalsh(0.5 * (H + H.T))[0] > 0
+        stable = is_positive_definite(H)
     else:
         stable = jnp.array(True)
     converged = converged & jnp.all(jnp.isfinite(x))

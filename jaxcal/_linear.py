@@ -16,6 +16,7 @@ import lineax as lx
 from jaxtyping import Array, Float
 
 from ._compensator import compensator_stiffness
+from ._dense import SmallCholesky
 from ._equilibrium import _residual, _scale, _solve, _tool_pose
 from ._kinematics import _vee_rotation_derivative, jacobian_theta
 from ._robot import Robot
@@ -89,7 +90,7 @@ def cartesian_compliance(
     J = _full_jacobian(robot, q, x)
     op = lx.MatrixLinearOperator(H, lx.positive_semidefinite_tag)
     # H⁻¹Jᵀ column by column; Cholesky because a stable equilibrium has H positive definite.
-    X = jax.vmap(lambda b: lx.linear_solve(op, b, lx.Cholesky()).value, in_axes=1, out_axes=1)(J.T)
+    X = jax.vmap(lambda b: lx.linear_solve(op, b, SmallCholesky()).value, 1, 1)(J.T)
     C = J @ X
     return 0.5 * (C + C.T)
 
@@ -106,5 +107,5 @@ def cartesian_stiffness(
     C = cartesian_compliance(robot, q, force)
     op = lx.MatrixLinearOperator(C, lx.positive_semidefinite_tag)
     eye = jnp.eye(6, dtype=C.dtype)
-    K = jax.vmap(lambda b: lx.linear_solve(op, b, lx.Cholesky()).value, in_axes=1, out_axes=1)(eye)
+    K = jax.vmap(lambda b: lx.linear_solve(op, b, SmallCholesky()).value, 1, 1)(eye)
     return 0.5 * (K + K.T)

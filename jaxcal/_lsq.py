@@ -25,6 +25,8 @@ import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from ._dense import SmallCholesky, SmallQR, eigvalsh
+
 __all__ = [
     "LsqFit",
     "nonlinear_fit",
@@ -94,7 +96,7 @@ def covariance_from_jacobian(
     Ns = N / (d[:, None] * d[None, :])
     Ns = 0.5 * (Ns + Ns.T)
     Ns = jnp.where(jnp.isfinite(Ns), Ns, 0.0)
-    lam = jnp.linalg.eigvalsh(Ns)
+    lam = eigvalsh(jax.lax.stop_gradient(Ns))
     well = ok_d & (lam[0] > RCOND * lam[-1])
     # Solve on a safe matrix (identity when ill posed) so Cholesky never sees a
     # singular matrix; the result is then replaced by NaN.
@@ -102,7 +104,7 @@ def covariance_from_jacobian(
     eye = jnp.eye(q, dtype=N.dtype)
     op = lx.MatrixLinearOperator(jnp.where(well, Ns, eye), lx.positive_semidefinite_tag)
     X = jax.vmap(
-        lambda b: lx.linear_solve(op, b, lx.Cholesky(), throw=False).value, in_axes=1, out_axes=1
+        lambda b: lx.linear_solve(op, b, SmallCholesky(), throw=False).value, in_axes=1, out_axes=1
     )(eye)
     cov = X / (d[:, None] * d[None, :])
     cov = 0.5 * (cov + cov.T)
@@ -180,44 +182,64 @@ def nonlinear_fit(
         return p0.at[idx].add(s_free * y)
 
     def weighted(y):
-        pred, _ = _split(predict(params(y)))
-        return ((target - pred) / sig).reshape(-1)
+        pred, ok = _split(predict(params(y)))
+        return ((target - pred) / sig).reshape(-1), (pred, ok)
+
+    def evaluate(y):
+        """Everything the fit needs at `y` from ONE model evaluation (forward mode, one
+        JVP per free parameter): the σ-weighted residual `r` and its Jacobian `J`, the
+        loss-transformed residual and Jacobian that LM works on, the prediction and
+        the model's ok flag."""
+        r, J, (pred, ok) = jax.vmap(
+            lambda e: jax.jvp(weighted, (y,), (e,), has_aux=True), out_axes=(None, 1, None)
+        )(jnp.eye(y.shape[0], dtype=y.dtype))
+        if loss == "huber":
+            rt, Jt = jax.vmap(
+                lambda c: jax.jvp(lambda v: huber_transform(v, huber_delta), (r,), (c,)),
+                in_axes=1,
+                out_axes=(None, 1),
+            )(J)
+        else:
+            rt, Jt = r, J
+        Jt = jnp.where(jnp.isfinite(Jt), Jt, 0.0)
+        return rt, (Jt, r, J, pred, ok.astype(y.dtype))
 
     # The residual carries a custom JVP that materialises its Jacobian by forward mode
     # (p ≤ ~10 JVPs): LM then linearises to a plain matrix product. Letting optimistix
     # linearise/transpose through the model's inner lineax solves fails (lineax's
     # tangent solves raise on non-finite values, which LM's trial steps can produce)
-    # and reverse mode would cost one VJP per residual (3n).
+    # and reverse mode would cost one VJP per residual (3n). The auxiliary outputs
+    # (raw residual, Jacobian, prediction) come back in the solver's final state, so
+    # the covariance needs no further evaluation of the model: every evaluation is a
+    # copy of the (large) equilibrium program, and compile time grows with the copies.
     @jax.custom_jvp
     def residual(y):
-        r = weighted(y)
-        return huber_transform(r, huber_delta) if loss == "huber" else r
+        return evaluate(y)
 
     @residual.defjvp
     def _residual_jvp(primals, tangents):
         (y,), (t,) = primals, tangents
-        f = lambda z: huber_transform(weighted(z), huber_delta) if loss == "huber" else weighted(z)
-        r, Jr = jax.vmap(lambda e: jax.jvp(f, (y,), (e,)), out_axes=(None, 1))(
-            jnp.eye(y.shape[0], dtype=y.dtype)
-        )
-        Jr = jnp.where(jnp.isfinite(Jr), Jr, 0.0)
-        return r, Jr @ t
+        out = evaluate(y)
+        rt, aux = out
+        zeros = jax.tree_util.tree_map(jnp.zeros_like, aux)
+        return out, (aux[0] @ t, zeros)
 
     def fn(y, _):
         return residual(y)
 
     y0 = jnp.zeros(idx.shape[0], p0.dtype)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    # Householder QR in plain jnp (`SmallQR`), not lineax's LAPACK QR: fits run vmapped
+    # over Monte-Carlo trials, where batched LAPACK kernels can deadlock (see `_dense`).
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())
     sol = optx.least_squares(
-        fn, solver, y0, max_steps=max_steps, throw=False, options={"jac": _JAC}
+        fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False, options={"jac": _JAC}
     )
     y = sol.value
     p = params(y)
-    pred, ok = _split(predict(p))
+    # The Gauss–Newton state holds the evaluation at the returned (last accepted) point.
+    _, r, J, pred, okf = sol.state.aux
+    ok = okf > 0.5
     res = target - pred
-    r = (res / sig).reshape(-1)
-    # ∂r/∂y = −∂pred/∂y / σ; the sign does not matter for JᵀJ.
-    J = jax.jacfwd(weighted)(y)
     w = huber_weights(r, huber_delta) if loss == "huber" else None
     cov_y, well = covariance_from_jacobian(J, w)
     cov_free = cov_y * (s_free[:, None] * s_free[None, :])

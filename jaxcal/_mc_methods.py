@@ -92,37 +92,6 @@ def _from_result(r):
     return r.estimate, r.std, ci[:, 0], ci[:, 1], jnp.all(jnp.asarray(r.converged))
 
 
-class _LocalResult(NamedTuple):
-    names: tuple[str, ...]
-    estimate: jnp.ndarray
-    std: jnp.ndarray
-    ci95: jnp.ndarray
-    converged: jnp.ndarray
-
-
-def _local_linear(robot: Robot, data: Dataset, *, free=None) -> _LocalResult:
-    # Minimal stand-in for the identification's linear method while it is absent:
-    # weighted least squares of eq. (20) in the aggregated compliances, known σ.
-    import lineax as lx
-
-    from ._observation import observation_aggregated
-
-    if free is not None:
-        raise ValueError("free needs jaxcal._identification")
-    B, names, _ = observation_aggregated(robot, data)
-    w = 1.0 / data.sigma
-    Bw = (B * w[:, None, None]).reshape(-1, B.shape[2])
-    assert data.deflection is not None
-    dw = (data.deflection * w[:, None]).reshape(-1)
-    N = lx.MatrixLinearOperator(Bw.T @ Bw, lx.positive_semidefinite_tag)
-    x = lx.linear_solve(N, Bw.T @ dw, lx.Cholesky()).value
-    eye = jnp.eye(Bw.shape[1], dtype=Bw.dtype)
-    cov = jnp.stack([lx.linear_solve(N, e, lx.Cholesky()).value for e in eye])
-    std = jnp.sqrt(jnp.diag(cov))
-    ci = jnp.stack([x - 1.959963984540054 * std, x + 1.959963984540054 * std], axis=1)
-    return _LocalResult(names, x, std, ci, jnp.array(True))
-
-
 def trial_fit(
     robot: Robot,
     design: Dataset,
@@ -134,27 +103,18 @@ def trial_fit(
     """The per-trial identification of `method` for `design` (deflections replaced per
     trial). Checks identifiability once, on the design, so a bad design fails before any
     trial runs (the identification names the unidentifiable parameters)."""
-    try:
-        from . import _identification as ident
-    except ImportError:
-        ident = None
-    if ident is None and method == "linear":
-        base = _local_linear
-    elif ident is None:
-        raise ValueError(f"method {method!r} needs jaxcal._identification")
-    kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
-    if ident is None:
-        pass
-    elif method == "linear":
-        base = ident.fit_linear
-    elif method == "two-step":
-        from ._two_step import fit_two_step
+    from . import _identification as ident
+    from ._two_step import fit_two_step
 
-        base = fit_two_step
-    elif method == "nonlinear":
-        base = ident.fit_nonlinear
-    else:
-        raise ValueError(f"unknown method {method!r}")
+    kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
+    fitters = {
+        "linear": ident.fit_linear,
+        "two-step": fit_two_step,
+        "nonlinear": ident.fit_nonlinear,
+    }
+    if method not in fitters:
+        raise ValueError(f"unknown method {method!r}; expected one of {sorted(fitters)}")
+    base = fitters[method]
 
     # A host (numpy) copy of q: under `jit` closed-over jax arrays become tracers, and
     # the identification groups rows by q2 on the host. Loads may be traced.

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._dense import cho_solve, cholesky
 from ._identification import IdentificationResult, free_mask, make_result
 from ._io import Dataset
 from ._lsq import RCOND, LinearFactor, linear_factor, linear_solve_factored
@@ -109,31 +110,6 @@ def two_step_system(robot: Robot, data: Dataset, *, free=None, exact: bool = Tru
     )
 
 
-def _cholesky(A: Float[Array, "n n"]) -> Float[Array, "n n"]:
-    """Lower Cholesky factor of a small SPD matrix, unrolled into plain XLA ops (the size
-    is static and small: the number of distinct q2 values, or 3)."""
-    n = A.shape[0]
-    L = jnp.zeros_like(A)
-    for j in range(n):
-        d = jnp.sqrt(A[j, j] - jnp.dot(L[j, :j], L[j, :j]))
-        L = L.at[j, j].set(d)
-        if j + 1 < n:
-            L = L.at[j + 1 :, j].set((A[j + 1 :, j] - L[j + 1 :, :j] @ L[j, :j]) / d)
-    return L
-
-
-def _cho_solve(L: Float[Array, "n n"], B: Float[Array, "n k"]) -> Float[Array, "n k"]:
-    """Solve `L Lᵀ X = B` by unrolled forward and back substitution."""
-    n = L.shape[0]
-    Y = jnp.zeros_like(B)
-    for i in range(n):
-        Y = Y.at[i].set((B[i] - L[i, :i] @ Y[:i]) / L[i, i])
-    X = jnp.zeros_like(B)
-    for i in reversed(range(n)):
-        X = X.at[i].set((Y[i] - L[i + 1 :, i] @ X[i + 1 :]) / L[i, i])
-    return X
-
-
 def _eigvalsh3(A: Float[Array, "3 3"]) -> Float[Array, 3]:
     """Ascending eigenvalues of a symmetric 3×3 matrix in closed form (trigonometric
     solution of the characteristic cubic), without a LAPACK call."""
@@ -168,16 +144,16 @@ def _step2(sys: TwoStepSystem, theta1, cov1):
     ck = jax.lax.stop_gradient(cov1[pos[:, None], pos[None, :]])
     dk = jax.lax.stop_gradient(K / k2i)
     SK = ck * (dk[:, None] * dk[None, :])
-    # Small unrolled Cholesky (`_cholesky`), not lineax or LAPACK: `_step2` runs per trial
+    # Small unrolled Cholesky (`_dense`), not lineax or LAPACK: `_step2` runs per trial
     # inside jit(vmap) Monte-Carlo chunks, where lineax's JVP error check (a host
     # callback) and batched LAPACK custom calls were both seen to deadlock XLA's CPU
     # runtime. A non-PD matrix gives NaN here, caught by `ok` in `solve_two_step`.
-    SiC = _cho_solve(_cholesky(SK), sys.C)
+    SiC = cho_solve(cholesky(SK), sys.C)
     # Column scaling keeps the 3×3 normal matrix O(1) (K ~ 1e7, Kc ~ 1e6, s0Kc ~ 1e5).
     col = jnp.sqrt(jnp.sum(sys.C * SiC, axis=0))
     N = (sys.C.T @ SiC) / (col[:, None] * col[None, :])
     rhs = (SiC.T @ K) / col
-    y = _cho_solve(_cholesky(N), rhs[:, None])[:, 0]
+    y = cho_solve(cholesky(N), rhs[:, None])[:, 0]
     y = y / col
     k2 = 1.0 / (y[0] * URAD)
     params = jnp.concatenate([full[:1], k2[None], full[1 + m :], jnp.stack([y[1], y[2] / y[1]])])
