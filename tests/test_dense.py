@@ -1,0 +1,92 @@
+"""`jaxcal._dense` (LAPACK-free small linear algebra) against numpy's LAPACK, plus
+gradients, vmap and the lineax solver plumbing."""
+
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from jaxcal import _dense as D
+
+sizes = st.integers(min_value=1, max_value=10)
+seeds = st.integers(min_value=0, max_value=2**31 - 1)
+
+
+def _spd(rng, n):
+    A = rng.normal(size=(n, n))
+    return A @ A.T + n * np.eye(n)
+
+
+@settings(max_examples=10, deadline=None)
+@given(n=sizes, seed=seeds)
+def test_factorisations_match_lapack(n, seed):
+    rng = np.random.default_rng(seed)
+    S, A, b = _spd(rng, n), rng.normal(size=(n, n)) + n * np.eye(n), rng.normal(size=n)
+    L = np.asarray(D.cholesky(jnp.asarray(S)))
+    np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-12, atol=1e-12)
+    x = D.cho_solve(jnp.asarray(L), jnp.asarray(b))
+    np.testing.assert_allclose(x, np.linalg.solve(S, b), rtol=1e-9, atol=1e-12)
+    lu, perm = D.lu_factor(jnp.asarray(A))
+    np.testing.assert_allclose(D.lu_solve(lu, perm, jnp.asarray(b)), np.linalg.solve(A, b), 1e-9)
+    np.testing.assert_allclose(
+        D.lu_solve(lu, perm, jnp.asarray(b), trans=True), np.linalg.solve(A.T, b), 1e-9
+    )
+    M = rng.normal(size=(3 * n + 1, n))
+    c = rng.normal(size=3 * n + 1)
+    np.testing.assert_allclose(
+        D.lstsq_qr(jnp.asarray(M), jnp.asarray(c)), np.linalg.lstsq(M, c, rcond=None)[0], 1e-8
+    )
+    H = A + A.T
+    np.testing.assert_allclose(
+        D.eigvalsh(jnp.asarray(H)), np.linalg.eigvalsh(H), rtol=1e-10, atol=1e-10 * n
+    )
+    assert bool(D.is_positive_definite(jnp.asarray(H))) == bool(np.linalg.eigvalsh(H)[0] > 0)
+
+
+def test_partial_pivoting_handles_a_zero_leading_entry():
+    A = jnp.array([[0.0, 1.0, 2.0], [1.0, 0.0, 3.0], [4.0, -3.0, 8.0]])
+    b = jnp.array([1.0, 2.0, 3.0])
+    np.testing.assert_allclose(D.lu_solve(*D.lu_factor(A), b), np.linalg.solve(A, b), 1e-12)
+
+
+def test_singular_and_indefinite_matrices_are_flagged_not_raised():
+    sol = lx.linear_solve(
+        lx.MatrixLinearOperator(jnp.ones((3, 3))), jnp.ones(3), D.SmallLU(), throw=False
+    )
+    assert sol.result != lx.RESULTS.successful
+    assert not bool(D.is_positive_definite(jnp.diag(jnp.array([1.0, -1e-9, 2.0]))))
+    assert not bool(jnp.all(jnp.isfinite(D.cholesky(jnp.diag(jnp.array([1.0, -1.0]))))))
+
+
+@pytest.mark.parametrize("solver", [D.SmallLU(), D.SmallCholesky()])
+def test_lineax_solvers_value_and_gradient(solver):
+    rng = np.random.default_rng(3)
+    S = jnp.asarray(_spd(rng, 5))
+    b = jnp.asarray(rng.normal(size=5))
+
+    def solve(S, b, s):
+        return lx.linear_solve(lx.MatrixLinearOperator(S, lx.positive_semidefinite_tag), b, s)
+
+    np.testing.assert_allclose(solve(S, b, solver).value, np.linalg.solve(S, b), 1e-10)
+    # Reverse mode through lineax uses the solver's transpose.
+    g = jax.grad(lambda S: jnp.sum(solve(S, b, solver).value ** 2))(S)
+    g_ref = jax.grad(lambda S: jnp.sum(jnp.linalg.solve(S, b) ** 2))(S)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-14)
+
+
+def test_small_qr_least_squares_via_lineax():
+    rng = np.random.default_rng(4)
+    M, c = jnp.asarray(rng.normal(size=(9, 4))), jnp.asarray(rng.normal(size=9))
+    x = lx.linear_solve(lx.MatrixLinearOperator(M), c, D.SmallQR()).value
+    np.testing.assert_allclose(x, np.linalg.lstsq(np.asarray(M), np.asarray(c), rcond=None)[0])
+
+
+def test_vmap_equals_loop():
+    rng = np.random.default_rng(5)
+    S = jnp.asarray(np.stack([_spd(rng, 4) for _ in range(6)]))
+    b = jnp.asarray(rng.normal(size=(6, 4)))
+    batched = jax.jit(jax.vmap(lambda S, b: D.lu_solve(*D.lu_factor(S), b)))(S, b)
+    looped = jnp.stack([D.lu_solve(*D.lu_factor(s), v) for s, v in zip(S, b, strict=True)])
+    np.testing.assert_allclose(batched, looped, rtol=1e-13)
