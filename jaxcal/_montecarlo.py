@@ -22,7 +22,6 @@ errors apply to both; only the tails differ).
 
 from __future__ import annotations
 
-import contextlib
 import math
 import sys
 import time
@@ -163,29 +162,6 @@ def _make_chunk_fn(
         )
 
     return jax.jit(run)
-
-
-@contextlib.contextmanager
-def _runtime_checks_as_nan():
-    """While tracing and running a study, equinox runtime checks inside the
-    identification (e.g. a solver meeting a singular matrix for one noise draw) return
-    NaN instead of raising, so one bad draw becomes one *counted* failed trial rather
-    than the end of the whole chunk. Scoped to the study and restored afterwards (it is
-    read when a function is traced); the global `EQX_ON_ERROR` setting is untouched."""
-    try:
-        import equinox._errors as eqx_errors
-    except ImportError:  # pragma: no cover
-        yield
-        return
-    old = getattr(eqx_errors, "EQX_ON_ERROR", None)
-    if old is None or old != "raise":
-        yield
-        return
-    eqx_errors.EQX_ON_ERROR = "nan"
-    try:
-        yield
-    finally:
-        eqx_errors.EQX_ON_ERROR = old
 
 
 def _gather(x: Array) -> np.ndarray:
@@ -353,8 +329,7 @@ def run_study(
         fn = _make_chunk_fn(tf.fit, chunk, mesh, student_t, keep_estimates, histogram_bins)
         # Compile ahead of time to time it; the jitted function then finds this
         # executable in JAX's cache.
-        with _runtime_checks_as_nan():
-            fn.lower(*args0).compile()
+        fn.lower(*args0).compile()
         cache[ckey] = fn
     compiled = cache[ckey]
     t_compile = time.perf_counter() - t0
@@ -405,9 +380,8 @@ def run_study(
             # One chunk at a time (the host merge is tiny): a program holding a host
             # callback deadlocked when the next chunk was dispatched while it ran.
             try:
-                with _runtime_checks_as_nan():
-                    out = compiled(key, jnp.int64(s), jnp.int64(trials), *args0[3:])
-                    jax.block_until_ready(out)
+                out = compiled(key, jnp.int64(s), jnp.int64(trials), *args0[3:])
+                jax.block_until_ready(out)
             except Exception:
                 # A runtime check inside the identification (e.g. a singular solve)
                 # fired: name unidentifiable parameters if that is the cause.
