@@ -16,7 +16,7 @@ def register(sub) -> None:
         description=(
             "Fit the robot's joint compliances k1..k6 (µrad/(N·m)) and compensator "
             "stiffness Kc (N/m) and free length s0 (m) to measured deflections, with "
-            "standard errors and 95%% intervals from the stated noise (sigma_mm or the "
+            "standard errors and 95 % intervals from the stated noise (sigma_mm or the "
             "robot's noise). Methods: nonlinear (default; full equilibrium model, "
             "Levenberg-Marquardt), two-step (paper eqs. 20-22) and linear (eq. 3). "
             "Parameters the data cannot determine are named; hold them at the robot's "

@@ -18,7 +18,7 @@ def register(sub) -> None:
             "model, then identify the parameters from TRIALS noisy copies (vectorised, in "
             "chunks, sharded over all devices) and report per parameter the true value, mean, "
             "bias, standard deviation, RMSE, the analytic standard error of the design and "
-            "the coverage of the 95 %% intervals. Failed trials are counted and excluded."
+            "the coverage of the 95 % intervals. Failed trials are counted and excluded."
         ),
     )
     p.add_argument("design", metavar="DESIGN.csv", help="design CSV (configurations and loads)")
