@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+import jax.numpy as jnp
 import numpy as np
 
 from ._cli import print_json
@@ -51,7 +52,7 @@ def true_robot(robot, seed: int, spread: float = 0.1):
 
     rng = np.random.default_rng(seed)
     p = np.asarray(get_parameters(robot))
-    return set_parameters(robot, p * (1.0 + spread * rng.standard_normal(p.shape)))
+    return set_parameters(robot, jnp.asarray(p * (1.0 + spread * rng.standard_normal(p.shape))))
 
 
 def register(sub) -> None:

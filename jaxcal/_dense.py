@@ -246,7 +246,8 @@ class SmallLU(_SmallDense):
         return lu_factor(matrix)
 
     def _solve(self, factors, b, transpose):
-        return lu_solve(*factors, b, trans=transpose)
+        lu, perm = factors
+        return lu_solve(lu, perm, b, trans=transpose)
 
 
 class SmallCholesky(_SmallDense):
