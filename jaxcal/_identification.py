@@ -1,6 +1,6 @@
-"""Identification of the elastostatic parameters with uncertainties: the result type and
-the pure, vmappable fitting cores of the `linear` and `nonlinear` methods (the
-`two-step` method is in `_two_step.py`, the host-side entry `identify` in `_identify.py`).
+"""Identification of the elastostatic parameters: the pure, vmappable fitting cores of the
+`linear` and `nonlinear` methods (the result type is in `_ident_result.py`, the
+`two-step` method in `_two_step.py`, the host-side entry `identify` in `_identify.py`).
 
 Every core handles one data set and never raises on values: batch Monte-Carlo draws
 with `jax.vmap` over the deflections,
@@ -13,8 +13,7 @@ res.converged                                       # (draws,) failed draws are 
 ```
 
 Parameter vectors are in user units (µrad/(N·m), N/m, m; `jaxcal.get_parameters`
-order) and names carry their units (`k1_urad_per_Nm`, `Kc_N_per_m`, `s0_m`).
-Covariances are `(JᵀWJ)⁻¹` with the *stated* σ of each row (not rescaled by χ²).
+order). Covariances are `(JᵀWJ)⁻¹` with the *stated* σ of each row (not rescaled by χ²).
 """
 
 from __future__ import annotations
@@ -23,14 +22,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float
 
 from ._compensator import compensator_stiffness
+from ._dense import lu_factor, lu_solve
 from ._equilibrium import _residual, _solve, _tool_pose
+from ._ident_result import IdentificationResult, free_mask, make_result, resolve_name
 from ._io import Dataset
 from ._lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
 from ._observation import observation_linear
-from ._parameters import get_parameters, parameter_units, set_parameters
+from ._parameters import get_parameters, set_parameters
 from ._robot import URAD, Robot
 
 __all__ = [
@@ -41,178 +42,11 @@ __all__ = [
     "solve_linear",
     "LinearSystem",
     "full_model_predictor",
+    # re-exported from `_ident_result` for existing importers
     "free_mask",
     "make_result",
+    "resolve_name",
 ]
-
-Z95 = 1.959963984540054  # two-sided 95 % normal quantile
-
-
-class IdentificationResult(eqx.Module):
-    """Estimates with uncertainties and fit statistics of one identification.
-
-    Arrays (a leading batch axis under `jax.vmap`):
-
-    - `estimate` `(p,)`: fitted parameters, user units, in the order of `names`.
-    - `covariance` `(p, p)`, `std` `(p,)`, `ci95` `(p, 2)` (estimate ± 1.96 std), from
-      the stated σ (NaN if the design is rank deficient).
-    - `residuals` `(n, 3)`: measured − model deflection, m, base frame.
-    - `standardized` `(n, 3)`: residuals / σ of the row.
-    - `rms` (m) over all coordinates; `chi2_red` = Σ standardized² / `dof`.
-    - `converged`: solver success, finite model, well-posed design.
-    - `steps`: solver steps (0 for the closed-form methods).
-    - `fixed_values` `(k,)`: values of the parameters held fixed, user units.
-
-    Static: `method`, `names` (fitted parameters with units), `dof` (= 3n − p),
-    `fixed` (names of parameters held at the robot's value).
-    """
-
-    estimate: Float[Array, " p"]
-    covariance: Float[Array, "p p"]
-    std: Float[Array, " p"]
-    ci95: Float[Array, "p 2"]
-    residuals: Float[Array, "n 3"]
-    standardized: Float[Array, "n 3"]
-    rms: Float[Array, ""]
-    chi2_red: Float[Array, ""]
-    converged: Bool[Array, ""]
-    steps: Int[Array, ""]
-    fixed_values: Float[Array, " k"]
-    method: str = eqx.field(static=True)
-    names: tuple[str, ...] = eqx.field(static=True)
-    dof: int = eqx.field(static=True)
-    fixed: tuple[str, ...] = eqx.field(static=True, default=())
-
-    # ----- host-side reporting (not traceable; for one unbatched result) -----
-
-    def outliers(self, threshold: float = 3.0) -> list[int]:
-        """0-based rows whose largest |standardized residual| exceeds `threshold`."""
-        z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
-        return [int(i) for i in np.flatnonzero(z > threshold)]
-
-    def parameter(self, name: str) -> tuple[float, float]:
-        """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""
-        full = resolve_name(name, self.names)
-        i = self.names.index(full)
-        return float(self.estimate[i]), float(self.std[i])
-
-    def to_dict(self, threshold: float = 3.0, ids: tuple[str, ...] = ()) -> dict:
-        """The JSON object of the command line: method, parameters (value, std), RMS in
-        mm, reduced χ², number of rows and outlier rows (1-based, or their ids)."""
-        est, std = np.asarray(self.estimate), np.asarray(self.std)
-        params = {
-            n: {"value": float(v), "std": float(s)}
-            for n, v, s in zip(self.names, est, std, strict=True)
-        }
-        rows = self.outliers(threshold)
-        d = {
-            "method": self.method,
-            "parameters": params,
-            "rms_mm": float(self.rms) * 1e3,
-            "chi2_red": float(self.chi2_red),
-            "n_rows": int(self.residuals.shape[0]),
-            "outliers": [ids[i] if ids and ids[i] else i + 1 for i in rows],
-        }
-        if self.fixed:
-            d["fixed"] = {
-                n: float(v) for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True)
-            }
-        if not bool(self.converged):
-            d["converged"] = False
-        return d
-
-    def table(self, truth: dict[str, float] | None = None) -> str:
-        """A readable table: parameter, estimate, std, 95 % interval, unit (and the true
-        value and the error in std units when `truth` maps names to values)."""
-        from ._cli import format_table
-
-        headers = ["parameter", "estimate", "std", "95% low", "95% high", "unit"]
-        if truth is not None:
-            headers += ["true", "error/std"]
-        rows = []
-        for i, n in enumerate(self.names):
-            v, s = float(self.estimate[i]), float(self.std[i])
-            lo, hi = (float(x) for x in self.ci95[i])
-            row: list[object] = [n.split("_")[0], v, s, lo, hi, parameter_units(n)]
-            if truth is not None:
-                t = truth.get(n, float("nan"))
-                row += [t, (v - t) / s if s > 0 else float("nan")]
-            rows.append(row)
-        for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True):
-            row = [n.split("_")[0] + " (fixed)", float(v), "-", "-", "-", parameter_units(n)]
-            if truth is not None:
-                row += [truth.get(n, float("nan")), "-"]
-            rows.append(row)
-        lines = [format_table(headers, rows), ""]
-        lines.append(
-            f"method {self.method}: {self.residuals.shape[0]} rows, RMS residual "
-            f"{float(self.rms) * 1e3:.4f} mm, reduced chi2 {float(self.chi2_red):.3f} "
-            f"(dof {self.dof})" + ("" if bool(self.converged) else "  [NOT CONVERGED]")
-        )
-        return "\n".join(lines)
-
-
-def resolve_name(name: str, names: tuple[str, ...]) -> str:
-    """Full parameter name for `name` given with or without its unit suffix."""
-    for n in names:
-        if name == n or name == n.split("_")[0]:
-            return n
-    short = ", ".join(n.split("_")[0] for n in names)
-    raise ValueError(f"unknown parameter {name!r}; expected one of {short} (or with units)")
-
-
-def free_mask(robot: Robot, free) -> tuple[bool, ...]:
-    """Normalise `free` (None, bools per physical parameter, or names) to a bool tuple
-    over `robot.parameter_names`."""
-    names = robot.parameter_names
-    if free is None:
-        return (True,) * len(names)
-    free = tuple(free)
-    if all(isinstance(f, bool | np.bool_) for f in free):
-        if len(free) != len(names):
-            raise ValueError(f"free must have {len(names)} entries ({names}), got {len(free)}")
-        return tuple(bool(f) for f in free)
-    chosen = {resolve_name(str(f), names) for f in free}
-    return tuple(n in chosen for n in names)
-
-
-def make_result(
-    method: str,
-    names_all: tuple[str, ...],
-    mask: tuple[bool, ...],
-    estimate_all: Float[Array, " P"],
-    cov_all: Float[Array, "P P"],
-    residuals: Float[Array, "n 3"],
-    sigma: Float[Array, " n"],
-    converged: Bool[Array, ""],
-    steps: Int[Array, ""] | int = 0,
-) -> IdentificationResult:
-    """Assemble an `IdentificationResult` from full-length vectors (traceable)."""
-    idx = np.flatnonzero(mask)
-    fidx = np.flatnonzero(~np.asarray(mask, bool))
-    est = estimate_all[idx]
-    cov = cov_all[np.ix_(idx, idx)]
-    std = jnp.sqrt(jnp.diag(cov))
-    z = residuals / sigma[:, None]
-    n = residuals.shape[0]
-    dof = 3 * n - len(idx)
-    return IdentificationResult(
-        estimate=est,
-        covariance=cov,
-        std=std,
-        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
-        residuals=residuals,
-        standardized=z,
-        rms=jnp.sqrt(jnp.mean(residuals**2)),
-        chi2_red=jnp.sum(z**2) / max(dof, 1),
-        converged=jnp.asarray(converged),
-        steps=jnp.asarray(steps),
-        fixed_values=estimate_all[fidx],
-        method=method,
-        names=tuple(names_all[i] for i in idx),
-        dof=dof,
-        fixed=tuple(names_all[i] for i in fidx),
-    )
 
 
 # ----------------------------------------------------------------- linear method
@@ -282,12 +116,16 @@ def solve_linear(system: LinearSystem, deflection: Float[Array, "n 3"]) -> Ident
     return make_result("linear", system.names, system.mask, est, cov, res, system.sigma, ok)
 
 
+#: `solve_linear` compiled once per shape (host-side callers; inside a trace it inlines).
+solve_linear_jit = eqx.filter_jit(solve_linear)
+
+
 def fit_linear(robot: Robot, data: Dataset, *, free=None) -> IdentificationResult:
     """Weighted linear least squares, eq. (3), on the linear model (eq. 5, no gravity or
     `H_θθ`): `solve_linear(linear_system(robot, data, free=free), data.deflection)`."""
     if data.deflection is None:
         raise ValueError("data has no deflections to fit")
-    return solve_linear(linear_system(robot, data, free=free), data.deflection)
+    return solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
 
 
 # -------------------------------------------------------------- nonlinear method
@@ -336,10 +174,10 @@ def _equilibrium_x(robot: Robot, q, force, moment):
     good = eq.converged & jnp.all(jnp.isfinite(H)) & jnp.all(jnp.isfinite(eq.x))
     H = jnp.where(good, H, jnp.eye(H.shape[0], dtype=H.dtype))
     g = jnp.where(good, g, 0.0)
-    # A plain LU solve of this 6×6 system: lineax's JVP of a solve inserts a runtime
-    # error check (a host callback) that, inside vmapped while loops, has been seen to
-    # stall the CPU runtime of Monte-Carlo batches.
-    dx = jnp.linalg.solve(H, g)
+    # An LU solve of this small system in plain jnp: no lineax JVP error check (a host
+    # callback) and no batched LAPACK kernel, which can deadlock XLA's CPU pool when
+    # vmapped over Monte-Carlo trials (see `_dense`).
+    dx = lu_solve(*lu_factor(H), g)
     ok = good & jnp.all(jnp.isfinite(dx))
     return x - jnp.where(jnp.isfinite(dx), dx, 0.0), ok
 
@@ -358,21 +196,25 @@ def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=Non
     if q_unique is None or inverse is None:
         q_unique, inverse = _unique_rows(data.q)
     use_m = _has_moments(data)
-    zero = jnp.zeros(3, data.q.dtype)
+    n = data.q.shape[0]
+    # Loaded rows and unloaded configurations go through ONE vmapped solve (zero load for
+    # the latter): a single copy of the equilibrium program in the compiled fit instead of
+    # two, which roughly halves its compile time; a zero moment changes nothing.
+    zeros = jnp.zeros((q_unique.shape[0], 3), data.force.dtype)
+    q_all = jnp.concatenate([jnp.asarray(data.q), jnp.asarray(q_unique, data.q.dtype)])
+    f_all = jnp.concatenate([data.force, zeros])
+    m_all = jnp.concatenate([data.moment, zeros])
 
     def predict(p):
         r = set_parameters(robot, p)
 
         def tool(q, f, m):
-            x, ok = _equilibrium_x(r, q, f, m)
+            x, ok = _equilibrium_x(r, q, f, m if use_m else None)
             return _tool_pose(r, q, x)[0], ok
 
-        p1, ok1 = jax.vmap(lambda q, f, m: tool(q, f, m if use_m else None))(
-            data.q, data.force, data.moment
-        )
-        p0, ok0 = jax.vmap(lambda q: tool(q, zero, None))(q_unique)
-        ok = ok1 & ok0[inverse]
-        dp = p1 - p0[inverse]
+        pt, oks = jax.vmap(tool)(q_all, f_all, m_all)
+        ok = oks[:n] & oks[n:][inverse]
+        dp = pt[:n] - pt[n:][inverse]
         return jnp.where(ok[:, None] & jnp.isfinite(dp), dp, _FAILED), ok
 
     return predict
@@ -422,35 +264,26 @@ def _nonlinear_with_groups(robot, data, q_u, inv, free, loss, huber_delta, max_s
         s0_fixed = not mask[7]
         to_p = lambda u: _to_physical(u, s0_fixed, p0[7])
         u0 = p0.at[7].set(p0[6] * p0[7])
-        fit = nonlinear_fit(
-            lambda u: predict(to_p(u)),
-            u0,
-            data.deflection,
-            data.sigma,
-            free=mask,
-            loss=loss,
-            huber_delta=huber_delta,
-            max_steps=max_steps,
-        )
-        G = jax.jacfwd(to_p)(fit.estimate)
-        est, cov = to_p(fit.estimate), G @ fit.covariance @ G.T
     else:
-        fit = nonlinear_fit(
-            predict,
-            p0,
-            data.deflection,
-            data.sigma,
-            free=mask,
-            loss=loss,
-            huber_delta=huber_delta,
-            max_steps=max_steps,
-        )
-        est, cov = fit.estimate, fit.covariance
+        to_p = lambda u: u
+        u0 = p0
+    fit = nonlinear_fit(
+        lambda u: predict(to_p(u)),
+        u0,
+        data.deflection,
+        data.sigma,
+        free=mask,
+        loss=loss,
+        huber_delta=huber_delta,
+        max_steps=max_steps,
+    )
+    G = jax.jacfwd(to_p)(fit.estimate)
+    cov = G @ fit.covariance @ G.T
     return make_result(
         "nonlinear" if loss == "l2" else "nonlinear-huber",
         robot.parameter_names,
         mask,
-        est,
+        to_p(fit.estimate),
         0.5 * (cov + cov.T),
         fit.residuals,
         data.sigma,

@@ -18,19 +18,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._ident_result import IdentificationResult, resolve_name
 from ._identification import (
-    IdentificationResult,
-    free_mask,
+    _nonlinear_with_groups,
     linear_columns,
     linear_system,
-    resolve_name,
-    solve_linear,
+    solve_linear_jit,
 )
 from ._io import Dataset
 from ._linear import linear_deflection
 from ._parameters import get_parameters, set_parameters
 from ._robot import Robot
-from ._two_step import solve_two_step, two_step_system
+from ._two_step import solve_two_step_jit, two_step_system
 
 __all__ = ["identify", "METHODS", "identifiability", "check_inputs", "design_matrix"]
 
@@ -49,7 +48,8 @@ _FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
 def check_inputs(robot: Robot, data: Dataset) -> None:
     """Raise `ValueError` naming the problem: float64 off, no deflections, non-finite
     values, non-positive σ, joint angles outside the robot's limits."""
-    if not jax.config.jax_enable_x64 or jnp.zeros(()).dtype != jnp.float64:
+    x64 = jax.config.jax_enable_x64  # pyright: ignore[reportAttributeAccessIssue]
+    if not x64 or jnp.zeros(()).dtype != jnp.float64:
         raise ValueError(
             "identification needs float64: call jax.config.update('jax_enable_x64', True) "
             "before using jaxcal (deflections are µm on metres)"
@@ -261,8 +261,6 @@ def identify(
 # Module-level jitted cores: repeated calls with equal shapes reuse one compilation.
 @eqx.filter_jit
 def _nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps):
-    from ._identification import _nonlinear_with_groups
-
     return _nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps)
 
 
@@ -274,22 +272,9 @@ def _nonlinear(robot, data, free, loss, delta, steps):
     )
 
 
-@eqx.filter_jit
-def _solve_linear_jit(system, deflection):
-    return solve_linear(system, deflection)
-
-
 def _linear(robot, data, free):
-    return _solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
-
-
-@eqx.filter_jit
-def _solve_two_step_jit(system, deflection):
-    return solve_two_step(system, deflection)
+    return solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
 
 
 def _two_step(robot, data, free):
-    return _solve_two_step_jit(two_step_system(robot, data, free=free), data.deflection)
-
-
-_ = free_mask  # re-exported helper (keeps the import explicit for readers)
+    return solve_two_step_jit(two_step_system(robot, data, free=free), data.deflection)

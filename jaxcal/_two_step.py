@@ -28,7 +28,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._dense import cho_solve, cholesky
-from ._identification import IdentificationResult, free_mask, make_result
+from ._ident_result import IdentificationResult, free_mask, make_result
 from ._io import Dataset
 from ._lsq import RCOND, LinearFactor, linear_factor, linear_solve_factored
 from ._observation import observation_linear, q2_groups
@@ -197,4 +197,9 @@ def fit_two_step(
     is fine; under `jit` build the system outside)."""
     if data.deflection is None:
         raise ValueError("data has no deflections to fit")
-    return solve_two_step(two_step_system(robot, data, free=free, exact=exact), data.deflection)
+    system = two_step_system(robot, data, free=free, exact=exact)
+    return solve_two_step_jit(system, data.deflection)
+
+
+#: `solve_two_step` compiled once per shape (host-side callers; inside a trace it inlines).
+solve_two_step_jit = eqx.filter_jit(solve_two_step)

@@ -21,8 +21,8 @@ from jax.sharding import Mesh
 
 import jaxcal
 from jaxcal import _dense
-from jaxcal._plans import PAPER_TABLE5_DEG
 from jaxcal._montecarlo import _make_chunk_fn, _prepare
+from jaxcal._plans import PAPER_TABLE5_DEG
 from jaxcal._simulate import _batch
 
 _LAPACK = re.compile(r"custom_call\s*@(\w*(?:lapack|blas|trsm|getrf|potrf|syevd|geqrf)\w*)")
