@@ -2,36 +2,31 @@
 and the paper's performance measures O1 (trace), O2 (determinant), O3 (weighted sum).
 
 For `m` configurations with loads, the least-squares covariance of the parameters is
-`σ² (Σ_j A_jᵀ A_j)⁻¹` (rows weighted by `1/σ_j²`), where `A_j = ∂Δp_j/∂params` (3 × p).
-Everything here is a pure JAX function of the joint angles, so criteria can be
-differentiated with respect to the configurations (that is what `optimise_design` does).
+`σ² (Σ_j A_jᵀ A_j)⁻¹` (rows weighted by `1/σ_j²`), where `A_j = ∂Δp_j/∂params` (3 × p)
+(`design_observation`, `_design_observation.py`: the parameter sets `physical` and
+`aggregated` and the observation models `full` and `linear`). Everything here is a pure
+JAX function of the joint angles, so criteria can be differentiated with respect to the
+configurations (that is what `optimise_design` does).
 
-**Parameter sets**
+**The default problem** (what `design_criteria`, `optimise_design` and `jaxcal design` /
+`evaluate` do without options): the `physical` set linearised from the **full** model at
+the nominal values (the issue's definition), O1 = trace of the covariance of the
+**relative** errors (scale-free: the parameters have different units), the largest
+test load, vertical, in every configuration. `k1` is then unidentifiable (a vertical
+force has no moment about axis 1, paper section 5.1, in the full model too): it is left
+out of the set (`include_k1=False`) and named as excluded, never inverted; `--loads
+mixed` brings it back.
 
-- `"physical"` (default): `k1..k6` (µrad/(N·m)), `Kc` (N/m), `s0` (m), linearised at
-  the nominal values, with two observation models (`model=`):
-  - `"full"`: the Jacobian of the full equilibrium deflection (loaded minus gravity-only
-    equilibrium), as `jaxcal.observation_physical` — the issue's definition of the set.
-    `jaxcal evaluate` uses it by default. Its gradient in `q` (for optimisation) is a
-    second-order derivative through the implicit function theorem: ~30x slower per
-    evaluation than the linear model's and ~10x longer to compile (~80 s instead of ~7 s
-    for the whole optimiser on 2 cores).
-  - `"linear"` (default here, and what `optimise_design` uses unless told otherwise,
-    for speed): the linear model of eq. (5) with joint 2's compliance replaced by the
-    aggregated `1/(1/k2 + K_comp(q2; Kc, s0))` (eq. 10), by autodiff. It ignores the
-    gravity pre-deflection and second-order load terms. The standard errors of k3..k6
-    agree with the full model's within 1-17 %, but the full model predicts 2-10x smaller
-    errors for k2, Kc and s0 (it also sees the compensator through the geometry of the
-    gravity pre-deflection). Consequence, measured for the default 12-configuration
-    problem: the linear-optimised design is no better than the best of 200 random designs
-    under the full-model criterion (ratio 1.02), while a full-model optimisation reaches
-    0.69 — so optimise with `model="full"` when the compensator parameters matter.
-- `"aggregated"`: the paper's eq. (19): `k1`, one aggregated joint-2 compliance per
-  *group* of configurations sharing a q2 value, `k3..k6` (all µrad/(N·m)).
-
-With vertical loads only, `k1` is not identifiable (a vertical force has no moment
-about axis 1, paper section 5.1); it is then left out of the set (`include_k1=False`)
-and named as excluded, never inverted.
+**What this trace measures.** With vertical loads the compensator parameters are barely
+determined: the compensator is 1-2 % of joint 2's stiffness, and even the optimal 12
+configurations leave Kc with ~100 % relative standard error (full model; ~290 % in the
+linear model). So the relative trace is > 90 % the variance of Kc (most of the rest is
+s0's), and the information on Kc and s0 comes through joint 2, whose lever arm under a
+vertical load depends on q2 alone (parallelogram; exactly in the linear model, up to
+small gravity terms in the full one). The design problem that matters is therefore
+mainly which q2 values to use, and 12 random q2 values already come within a factor
+1.4-1.5 of the optimum (see `_design` for the measured gain over random designs, and
+`focus=` for criteria about a subset of the parameters, the others still estimated).
 
 **Scale.** With `relative=True` the criteria are those of the *relative* errors (each
 parameter divided by its nominal value), the scale-free variant; the default is relative
@@ -48,15 +43,18 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
-from ._compensator import compensator_stiffness
-from ._equilibrium import solve_deflection
-from ._kinematics import Rx, forward, jacobian_theta
-from ._parameters import get_parameters, set_parameters
-from ._robot import URAD, Robot
+from ._dense import cholesky, solve_lower
+from ._design_observation import (
+    MODELS,
+    PARAMETER_SETS,
+    _check_set,
+    design_observation,
+    design_parameter_names,
+)
+from ._robot import Robot
 
 __all__ = [
     "CRITERIA",
@@ -72,166 +70,6 @@ __all__ = [
 ]
 
 CRITERIA: tuple[str, ...] = ("trace", "det", "weighted")
-PARAMETER_SETS: tuple[str, ...] = ("physical", "aggregated")
-MODELS: tuple[str, ...] = ("linear", "full")
-
-
-def _check_set(parameters: str, model: str = "linear") -> None:
-    if parameters not in PARAMETER_SETS:
-        raise ValueError(f"parameters must be one of {PARAMETER_SETS}, got {parameters!r}")
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
-    if model == "full" and parameters != "physical":
-        # Eq. (19)'s per-q2 compliances are parameters of the linear model only.
-        raise ValueError("model='full' needs parameters='physical' (the aggregated set is linear)")
-
-
-def design_parameter_names(
-    robot: Robot,
-    parameters: str = "physical",
-    *,
-    include_k1: bool = True,
-    q2_values_deg: np.ndarray | None = None,
-    n_groups: int | None = None,
-) -> tuple[str, ...]:
-    """Names (with units) of the parameters of a set, in the order of the criteria's
-    covariance. Aggregated joint-2 names carry the group's q2 value when known."""
-    _check_set(parameters)
-    if parameters == "physical":
-        names = robot.parameter_names
-    else:
-        if q2_values_deg is not None:
-            k2 = tuple(f"k2@{v:.4g}deg_urad_per_Nm" for v in np.asarray(q2_values_deg))
-        else:
-            k2 = tuple(f"k2@group{g}_urad_per_Nm" for g in range(int(n_groups or 0)))
-        names = ("k1_urad_per_Nm",) + k2 + tuple(f"k{i}_urad_per_Nm" for i in range(3, 7))
-    return names if include_k1 else names[1:]
-
-
-def _screw_jacobian(robot: Robot, q) -> Float[Array, "6 6"]:
-    # The same matrix as `jacobian_theta` at θ = 0 (a test checks it), from one forward
-    # pass and the joint axes: column i = (a_i × (pT − o_i), a_i). Written out because
-    # the design optimiser differentiates it in reverse mode inside BFGS: the forward-mode
-    # Jacobian of the kinematics roughly doubles the compiled program.
-    P = forward(robot, q, jnp.zeros_like(q))
-    ez = jnp.array([0.0, 0.0, 1.0], q.dtype)
-    y1 = P.R1[:, 1]
-    a4 = P.R3[:, 0]
-    a5 = P.R3 @ Rx(q[3])[:, 1]
-    a6 = P.Rw[:, 0]
-    pt = P.p_tool
-    zero = jnp.zeros(3, q.dtype)
-    if robot.parallelogram:
-        # θ2 turns the lower arm only; the upper arm translates with the elbow.
-        c2 = (jnp.cross(y1, P.p_elbow - P.p_j2), zero)
-    else:
-        c2 = (jnp.cross(y1, pt - P.p_j2), y1)
-    cols = [
-        (jnp.cross(ez, pt), ez),
-        c2,
-        (jnp.cross(-y1, pt - P.p_elbow), -y1),
-        (jnp.cross(a4, pt - P.p_wrist), a4),
-        (jnp.cross(a5, pt - P.p_wrist), a5),
-        (jnp.cross(a6, pt - P.p_wrist), a6),
-    ]
-    return jnp.stack([jnp.concatenate(c) for c in cols], axis=1)
-
-
-def _linear_columns(robot: Robot, q, force, moment) -> Float[Array, "3 6"]:
-    # A_j of eq. (4): column i is the position part of J_i J_iᵀ W per µrad/(N·m).
-    J = jacobian_theta(robot, q) if robot.effects else _screw_jacobian(robot, q)
-    W = jnp.concatenate([force, moment])
-    return J[:3] * ((J.T @ W) * URAD)[None, :]
-
-
-def _full_columns(robot: Robot, p0, q, force, moment) -> Float[Array, "3 p"]:
-    # ∂Δp/∂params of the full equilibrium model (what `observation_physical` computes),
-    # forward mode through the implicit function theorem; NaN if an equilibrium solve
-    # failed, so that the criteria report a rank-deficient (+inf) design, never a number.
-    def dp(p):
-        return solve_deflection(set_parameters(robot, p), q, force, moment)
-
-    obs = jax.jacfwd(lambda p: dp(p)[0])(p0)
-    ok = dp(p0)[1]
-    return jnp.where(ok, obs, jnp.nan)
-
-
-def _effective_compliance(robot: Robot, p: Float[Array, " p"], q2) -> Float[Array, 6]:
-    # Compliances (µrad/(N·m)) of the linear model for physical parameters p (user
-    # units): joint 2 aggregated with the compensator's tangent stiffness (eq. 10).
-    k = p[:6]
-    if not robot.has_compensator:
-        return k
-    r = eqx.tree_at(lambda r: (r.Kc, r.s0), robot, (p[6], p[7]))
-    K2 = 1.0 / (k[1] * URAD) + compensator_stiffness(r, q2)
-    return k.at[1].set(1.0 / K2 / URAD)
-
-
-def design_observation(
-    robot: Robot,
-    q: Float[Array, "m 6"],
-    force: Float[Array, "m 3"],
-    moment: Float[Array, "m 3"] | None = None,
-    *,
-    parameters: str = "physical",
-    groups: Int[Array, " m"] | None = None,
-    n_groups: int | None = None,
-    include_k1: bool = True,
-    model: str = "linear",
-) -> tuple[Float[Array, "m 3 p"], Float[Array, " p"]]:
-    """Observation matrices `A_j` (m per parameter unit, base frame) of every
-    configuration and the nominal parameter values (user units) they are taken at.
-
-    `q` rad, `force` N, `moment` N·m at the tool point. For `parameters="aggregated"`
-    pass `groups` (the q2 group of each configuration, `0..n_groups-1`) and the static
-    `n_groups`; the aggregated nominal values are the linear model's joint-2 compliance
-    at each group's mean q2. Traceable; differentiable in `q`.
-
-    `model` (physical set only): `"linear"` (default; eq. 5 with the compensator folded
-    into joint 2, see the module doc) or `"full"` (the Jacobian of the full equilibrium
-    deflection, as `jaxcal.observation_physical`; its gradient in `q` is a second-order
-    derivative through the implicit function theorem: ~30x slower to run, ~10x slower to
-    compile).
-    """
-    _check_set(parameters, model)
-    q = jnp.asarray(q)
-    if q.ndim != 2 or q.shape[1] != 6:
-        raise ValueError(f"q must have shape (m, 6), got {q.shape}")
-    m = q.shape[0]
-    force = jnp.asarray(force, q.dtype)
-    if force.shape != (m, 3):
-        raise ValueError(f"force must have shape ({m}, 3), got {force.shape}")
-    moment = jnp.zeros_like(force) if moment is None else jnp.asarray(moment, q.dtype)
-    if moment.shape != (m, 3):
-        raise ValueError(f"moment must have shape ({m}, 3), got {moment.shape}")
-    p0 = get_parameters(robot).astype(q.dtype)
-    if model == "full":
-        obs = jax.vmap(lambda a, f, t: _full_columns(robot, p0, a, f, t))(q, force, moment)
-        if not include_k1:
-            obs, p0 = obs[:, :, 1:], p0[1:]
-        return obs, p0
-    A = jax.vmap(lambda a, f, t: _linear_columns(robot, a, f, t))(q, force, moment)
-    if parameters == "physical":
-        dk = jax.vmap(jax.jacfwd(lambda p, q2: _effective_compliance(robot, p, q2)), (None, 0))(
-            p0, q[:, 1]
-        )  # (m, 6, p): ∂k_eff/∂params
-        obs = jnp.einsum("mri,mip->mrp", A, dk)
-        nominal = p0
-    else:
-        if groups is None or n_groups is None:
-            raise ValueError("parameters='aggregated' needs groups and n_groups")
-        groups = jnp.asarray(groups)
-        if groups.shape != (m,):
-            raise ValueError(f"groups must have shape ({m},), got {groups.shape}")
-        onehot = jax.nn.one_hot(groups, n_groups, dtype=q.dtype)  # (m, G)
-        obs = jnp.concatenate([A[:, :, :1], A[:, :, 1:2] * onehot[:, None, :], A[:, :, 2:]], 2)
-        count = jnp.maximum(onehot.sum(0), 1.0)
-        q2g = (onehot * q[:, 1:2]).sum(0) / count
-        k2g = jax.vmap(lambda a: _effective_compliance(robot, p0, a)[1])(q2g)
-        nominal = jnp.concatenate([p0[:1], k2g, p0[2:6]])
-    if not include_k1:
-        obs, nominal = obs[:, :, 1:], nominal[1:]
-    return obs, nominal
 
 
 class DesignCriteria(eqx.Module):
@@ -284,7 +122,7 @@ def _scaled_information(obs, nominal, sigma):
 
 
 def _factor(M) -> tuple[Float[Array, "p p"], Bool[Array, ""]]:
-    L = jnp.linalg.cholesky(M)
+    L = cholesky(M)
     d = jnp.diagonal(L)
     # Positive definite to working precision: a pivot below √eps of the largest means a
     # (numerically) rank-deficient information matrix.
@@ -294,12 +132,12 @@ def _factor(M) -> tuple[Float[Array, "p p"], Bool[Array, ""]]:
 
 
 def _inverse_factor(L) -> Float[Array, "p p"]:
-    # X = L⁻¹ by triangular solves (lineax), so that M⁻¹ = XᵀX.
+    # X = L⁻¹ by forward substitution, so that M⁻¹ = XᵀX. Plain jnp (`_dense`), not
+    # LAPACK: criteria are vmapped over candidate designs, where batched LAPACK kernels
+    # can deadlock XLA's CPU thread pool.
     p = L.shape[0]
     Ls = jnp.where(jnp.isfinite(L), L, 0.0) + jnp.where(jnp.isfinite(L), 0.0, jnp.eye(p))
-    op = lx.MatrixLinearOperator(Ls, lx.lower_triangular_tag)
-    eye = jnp.eye(p, dtype=L.dtype)
-    return jax.vmap(lambda b: lx.linear_solve(op, b, lx.Triangular()).value, 1, 1)(eye)
+    return solve_lower(Ls, jnp.eye(p, dtype=L.dtype))
 
 
 def _concrete(x) -> np.ndarray | None:
@@ -398,7 +236,7 @@ def design_criteria(
     sigma: Float[Array, " m"] | float | None = None,
     include_k1: bool | None = None,
     focus: tuple[str, ...] | None = None,
-    model: str = "linear",
+    model: str | None = None,
 ) -> DesignCriteria:
     """Every criterion of a design (host-side entry point; use `design_observation` +
     `criteria_from_observation` inside traced code).
@@ -416,10 +254,11 @@ def design_criteria(
       (`k1_identifiable`).
     - `focus`: criteria of these parameters only (`select_parameters`), e.g.
       `("k2", "k3")` for the parallelogram (paper section 5.2); default all.
-    - `model`: `"linear"` or `"full"` (physical set only), see `design_observation`.
-      The issue's definition of the physical set is the full model linearised at the
-      nominal values; `jaxcal evaluate` uses it by default.
+    - `model`: `"full"` (default for physical: the issue's definition of the set) or
+      `"linear"` (eq. 5; always for aggregated), see `design_observation`.
     """
+    if model is None:
+        model = "full" if parameters == "physical" else "linear"
     _check_set(parameters, model)
     q = jnp.asarray(q)
     m = q.shape[0]

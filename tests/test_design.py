@@ -51,11 +51,13 @@ def test_aggregated_matches_numpy_reference(robot, designs):
 def test_physical_linearisation_matches_finite_differences(robot, designs):
     # ∂Δp/∂(k2, Kc, s0) of the linear model with the compensator aggregated (eq. 10),
     # against central differences of jaxcal.linear_deflection in the parameters.
-    from jaxcal._criteria import design_observation
+    from jaxcal._design_observation import design_observation
 
     q = jnp.asarray(designs[1][:3])
     F = jnp.asarray(_vertical(robot, 3))
-    obs, p0 = jax.jit(lambda a, f: design_observation(robot, a, f, include_k1=True))(q, F)
+    obs, p0 = jax.jit(
+        lambda a, f: design_observation(robot, a, f, include_k1=True, model="linear")
+    )(q, F)
 
     @jax.jit
     def lin(p):
@@ -73,9 +75,9 @@ def test_physical_linearisation_matches_finite_differences(robot, designs):
 @pytest.mark.parametrize(
     "kw",
     [
-        dict(criterion="trace"),
-        dict(criterion="det"),
-        dict(criterion="weighted", relative=False, loads="mixed"),
+        dict(criterion="trace", model="linear"),
+        dict(criterion="det", model="linear"),
+        dict(criterion="weighted", relative=False, loads="mixed", model="linear"),
         dict(criterion="trace", parameters="aggregated"),
         dict(criterion="weighted", parameters="aggregated", weights=(0.3, 0.7)),
     ],
@@ -112,7 +114,8 @@ def test_full_model_criterion_value_and_gradient(robot, designs):
     # equilibrium model), and the criterion's gradient in q (second-order autodiff
     # through the implicit function theorem) agrees with central differences. 3
     # configurations keep the run short (the compile cost hardly depends on m).
-    from jaxcal._criteria import criteria_from_observation, design_observation
+    from jaxcal._criteria import criteria_from_observation
+    from jaxcal._design_observation import design_observation
 
     q = jnp.asarray(designs[5][:3])
     F = jnp.asarray(_vertical(robot, 3))
@@ -145,16 +148,17 @@ def test_full_model_criterion_value_and_gradient(robot, designs):
 
 def test_vertical_loads_exclude_k1_and_rank_deficiency_is_named(robot, designs):
     q = designs[3]
+    # Default model (full): k1 excluded, the rest of full rank.
     c = design_criteria(robot, q, _vertical(robot, 12))
     assert "k1_urad_per_Nm" not in c.names and bool(c.full_rank)
-    forced = design_criteria(robot, q, _vertical(robot, 12), include_k1=True)
+    forced = design_criteria(robot, q, _vertical(robot, 12), include_k1=True, model="linear")
     assert not bool(forced.full_rank)
     assert np.isinf(float(forced.trace))
     assert forced.unidentifiable() == ("k1_urad_per_Nm",)
     # One q2 value: Kc and s0 cannot be separated from k2 (eq. 21 needs 3 values of q2).
     q1 = q.copy()
     q1[:, 1] = 0.3
-    c1 = design_criteria(robot, q1, _vertical(robot, 12))
+    c1 = design_criteria(robot, q1, _vertical(robot, 12), model="linear")
     assert not bool(c1.full_rank)
     assert {"Kc_N_per_m", "s0_m"} <= set(c1.unidentifiable())
 
@@ -191,44 +195,43 @@ def test_structured_and_paper_plans(robot):
 
 @pytest.fixture(scope="module")
 def optimised(robot):
-    return optimise_design(robot, 12, starts=8, max_steps=300, seed=0)
+    # The default problem (physical set linearised from the full model, relative trace,
+    # vertical loads, k1 excluded), started from the best 4 of the 200 random feasible
+    # designs it is compared with (seed 0: the `designs` fixture).
+    return optimise_design(robot, 12, starts=4, pool=200, seed=0)
 
 
 def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised):
+    from jaxcal._design import _pool_values
+
     d = optimised
-    assert d.feasible
+    assert d.feasible and d.model == "full"
     cv = np.asarray(constraint_values(robot, jnp.asarray(d.q)))
     assert cv.max() <= 0
+    # The reference: the best of the 200 random designs under the same (full-model)
+    # criterion, the best one re-evaluated through `design_criteria`'s own path.
     P = DesignProblem(robot, 12)
-    crit = jax.jit(jax.vmap(lambda a: design_objective(P, a)))
-    rand = np.asarray(crit(jnp.asarray(designs)))
+    rand = np.asarray(_pool_values(P, jnp.asarray(designs)))
+    assert d.random_best == pytest.approx(rand.min(), rel=1e-12)
+    F = _vertical(robot, 12)
+    best_random = design_criteria(robot, designs[int(np.argmin(rand))], F)
+    assert float(best_random.trace) == pytest.approx(rand.min(), rel=1e-8)
+    assert d.value == pytest.approx(float(design_criteria(robot, d.q, F).trace), rel=1e-8)
     ratio = d.value / rand.min()
-    print(
-        f"physical trace: optimised {d.value:.4g}, best of 200 random {rand.min():.4g}, "
-        f"ratio {ratio:.3f}"
-    )
-    assert d.value == pytest.approx(float(design_objective(P, jnp.asarray(d.q))))
-    # The issue's Done-when bound (ratio <= 0.5) is NOT met for the physical set, and we
-    # do not assert it. Why: the relative trace is almost entirely the variance of k2, Kc
-    # and s0 (the compensator is ~2 % of joint-2 stiffness; asserted below), and with the
-    # parallelogram and vertical loads the information on these three comes from the
-    # joint-2 column alone, a rank-1 term per configuration that depends on q2 only. The
-    # other joints can only remove their correlation with k3..k6, which the optimum does.
-    # So the optimum is a 1-D design over the 12 q2 values, which random designs (12
-    # random q2 each) already approach within 1.8x.
+    print(f"physical/full trace: optimised {d.value:.4g}, best of 200 random {rand.min():.4g}")
+    print(f"ratio {ratio:.3f}")
+    # The issue's Done-when bound (ratio <= 0.5) is NOT met for this criterion and is not
+    # asserted: the criterion's optimum itself lies at ratio ~0.69. Evidence: these
+    # settings (seed 0) and seed 1 with 8 random starts x 300 steps both reach 1.2053;
+    # other runs stop at 1.2137, a neighbouring local optimum (+0.7 %; the full optimum
+    # is a two-level design over q2, see `_design`'s module doc). What we assert: the
+    # optimiser reaches that optimum within 1 % (the spread of the runs we measured),
+    # and the trace is > 90 % the variance of Kc, the reason why random designs come so
+    # close.
+    assert d.value <= 1.01 * 1.2053
+    assert ratio < 0.75
     rel = dict(zip(d.criteria.names, np.asarray(d.criteria.relative_std) ** 2, strict=True))
-    share = (rel["k2_urad_per_Nm"] + rel["Kc_N_per_m"] + rel["s0_m"]) / d.value
-    assert share > 0.999
-    # What holds instead: the best value we found with 32 starts x 1000 steps is 8.2735
-    # (ratio 8.2735 / 14.993 = 0.552); the 8 starts x 300 steps here measure 8.392
-    # (1.4 % above it). Bound: within 3 % of that optimum, ratio <= 1.03 x 0.552 = 0.569.
-    assert d.value <= 1.03 * 8.2735
-    assert ratio <= 0.569
-    # Not tested (too slow, measured once): under the FULL model (the issue's definition
-    # of the physical set, `jaxcal evaluate`'s default) this linear-optimised design is no
-    # better than random: trace 1.793 vs best of the same 200 random 1.757 (ratio 1.02);
-    # optimising on the full model (model="full", 4 starts x 150 steps, 94 s) gives 1.214
-    # (ratio 0.69).
+    assert rel["Kc_N_per_m"] / d.value > 0.9
 
 
 def test_aggregated_design_at_most_half_of_random(robot):
@@ -255,7 +258,13 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
 
     out = tmp_path / "design.csv"
     rc = main(
-        ["design", "--configs", "3", "--starts", "2", "--steps", "40", "-o", str(out), "--json"]
+        [
+            "design",
+            # 12 configurations: `evaluate` (full model) then re-uses the compiled
+            # full-model observation of the other tests.
+            *("--configs", "12", "--starts", "2", "--steps", "40", "--model", "linear"),
+            *("--pool", "8", "-o", str(out), "--json"),
+        ]
     )
     res = json.loads(capsys.readouterr().out)
     assert rc == 0 and res["feasible"]
@@ -267,8 +276,10 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
         "std",
         "feasible",
         "seconds",
+        "random_best",  # with --pool: the best of the random designs the starts came from
     }
-    assert np.shape(res["configs_deg"]) == (3, 6)
+    assert np.shape(res["configs_deg"]) == (12, 6)
+    assert res["value"] <= res["random_best"]
     header = out.read_text().splitlines()[0]
     assert "dx_mm" not in header and header.startswith("q1_deg")
     # The design was optimised on the linear model: evaluate --model linear reproduces
@@ -291,7 +302,7 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
 
 
 def test_screw_jacobian_and_focus(robot, designs):
-    from jaxcal._criteria import _screw_jacobian
+    from jaxcal._design_observation import _screw_jacobian
 
     qs = jnp.asarray(designs[4])
     a = jax.jit(jax.vmap(lambda q: _screw_jacobian(robot, q)))(qs)
