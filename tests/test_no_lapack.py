@@ -92,3 +92,14 @@ def test_monte_carlo_chunk_has_no_lapack(robot, design, method):
     # must come back as a flag, and a callback inside a vmapped chunk is a second way to
     # stall the CPU runtime.
     assert "callback" not in text
+
+
+@pytest.mark.parametrize("parameters", ["physical", "aggregated"])
+def test_design_objective_and_gradient_have_no_lapack(robot, parameters):
+    # What the multi-start optimiser runs: the criterion and its gradient, vmapped over
+    # starts (physical: linearised from the full model, through the equilibrium).
+    groups = tuple(i % 3 for i in range(12)) if parameters == "aggregated" else None
+    P = jaxcal.DesignProblem(robot, 12, parameters=parameters, groups=groups)
+    q = jnp.asarray(jaxcal.random_designs(robot, 2, 12, seed=0, groups=groups))
+    f = jax.jit(jax.vmap(jax.value_and_grad(lambda x: jaxcal.design_objective(P, x))))
+    assert _lapack_calls(f.lower(q)) == set()
