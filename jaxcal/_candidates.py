@@ -211,6 +211,10 @@ class Candidate:
     - `physical(values)`: whether fitted values are physically meaningful (e.g. a
       compliance must be positive); an unphysical best fit is never chosen.
     - `words(values, stds)`: the effect in a sentence.
+    - `screen_size`: for a one-parameter effect whose derivative at "absent" does not
+      show it (a dead band hidden by a preload), the size at which the workflow's
+      screening takes a secant instead of the tangent at 0 (also the fit's start when
+      the linear step is unphysical).
     """
 
     name: str
@@ -222,6 +226,7 @@ class Candidate:
     applies: Callable[[Robot], bool] = lambda robot: True
     physical: Callable[[np.ndarray], bool] = lambda v: True
     decoy: bool = False
+    screen_size: float | None = None
 
     @property
     def label(self) -> str:
@@ -264,6 +269,7 @@ def _backlash(j: int) -> Candidate:
             f"{_pm(v[0], s[0], 'µrad')}"
         ),
         physical=lambda v: bool(v[0] > 0),
+        screen_size=40.0,
     )
 
 

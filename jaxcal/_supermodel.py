@@ -1,17 +1,21 @@
-"""One model that holds the nominal robot and every candidate effect at once, so that a
-single compiled function serves the nominal fit and every candidate fit.
+"""One model that holds the nominal robot and every candidate effect at once, so that
+one compiled function serves the nominal fit, every candidate fit, predictions and
+screening Jacobians.
 
 Every candidate is "absent" at parameter value 0, so the nominal model *is* the super
 model with all candidate parameters at 0, and a candidate fit frees the nominal
-parameters plus that candidate's. The compiled function returns σ-weighted residuals and
-the Jacobian with respect to *all* parameters (forward mode through the implicit function
-theorem of the equilibrium), batched over parameter vectors and target deflections: one
-compile per (robot structure, candidate list, number of rows), reused for every data set
-with the same design shape — the seeds study fits all seeds and candidates in one call.
+parameters plus that candidate's. Fits are optimistix Levenberg–Marquardt
+(`optx.least_squares`, `SmallQR` linear solves) on the full equilibrium model, with the
+derivatives of `jaxcal._identification`'s full-model predictor (implicit-function
+derivatives whose linear solve never raises), `jax.vmap`-ed over a batch of fits
+(seeds × candidates). Which parameters a fit frees is *traced* (indices of `SLOTS`
+candidate parameters and a 0/1 mask), so one compile per robot structure and design
+shape serves everything.
 
-Fitting is a batched Levenberg–Marquardt driven on the host (numpy, one small damped
-normal-equation solve per batch member and step) around that one compiled
-residual-and-Jacobian function; see `SuperModel.fit` for why.
+Why not `jaxcal._lsq.nonlinear_fit`: its free set is static (one compile per candidate,
+~17, each minutes on two cores) and its compiled program holds four copies of the model
+(LM step, final prediction, two final Jacobians); this loop holds two (the LM step's
+residual-and-Jacobian and the final one) and the free set is data.
 """
 
 from __future__ import annotations
@@ -20,19 +24,33 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._candidates import Candidate
+from ._dense import SmallQR
 from ._effects import observe_effects
-from ._equilibrium import _solve, _tool_pose
+from ._equilibrium import _tool_pose
+from ._identification import _equilibrium_x
 from ._io import Dataset
 from ._robot import URAD, Robot
 
 __all__ = ["SuperModel", "BatchFit", "configuration_groups"]
 
-#: Batch members per call of the compiled function (batches are padded to a multiple).
+#: Batch members per call of a compiled function (batches are padded to a multiple, so
+#: one compile serves every batch size).
 CHUNK = 8
+#: Model value put in place of a failed equilibrium, m (far outside any deflection, so
+#: an LM trial step into a region where the model fails is rejected).
+_FAILED = 1.0
 _COMPILED: dict = {}
+#: Candidate-parameter slots of one fit: the most parameters a candidate has (tracker 3).
+SLOTS = 3
+#: LM tolerances on the scaled parameters u = Δp/scale (O(1)), as in `jaxcal._lsq`: a
+#: change of 1e-5 of a parameter's typical size is far below its statistical uncertainty.
+RTOL = ATOL = 1e-5
+#: LM step budget (static: one value, one compile; fits that hit it are flagged).
+MAX_STEPS = 32
 
 
 def configuration_groups(q) -> np.ndarray:
@@ -46,10 +64,10 @@ class BatchFit(eqx.Module):
     """Host-side result of a batch of fits (numpy arrays, batch first).
 
     `params` (B, P) user units; `free` (B, P) bool; `chi2` (B,); `residuals` (B, n, 3) m
-    measured − model; `jac` (B, 3n, P) σ-weighted Jacobian of the *model* at the
-    optimum; `cov` (B, P, P) `(JᵀJ)⁻¹` over the free parameters (zeros elsewhere, NaN if
-    rank deficient); `ok` (B,) every equilibrium converged and the fit is well posed;
-    `steps` (B,) accepted steps.
+    measured − model; `jac` (B, 3n, P) σ-weighted Jacobian of the *model* at the optimum
+    (free columns; every column for `SuperModel.jacobian`); `cov` (B, P, P) `(JᵀJ)⁻¹`
+    over the free parameters (zeros elsewhere, NaN if rank deficient); `ok` (B,) LM
+    succeeded, every equilibrium converged and the fit is well posed; `steps` (B,).
     """
 
     params: np.ndarray
@@ -60,6 +78,18 @@ class BatchFit(eqx.Module):
     cov: np.ndarray
     ok: np.ndarray
     steps: np.ndarray
+
+
+def _chunks(fn, B, *arrays):
+    """Call `fn` on fixed-size chunks (padding with copies of member 0); numpy out."""
+    pad = (-B) % CHUNK
+    idx = np.concatenate([np.arange(B), np.zeros(pad, int)])
+    arrays = [np.asarray(a)[idx] for a in arrays]
+    outs = []
+    for i in range(0, B + pad, CHUNK):
+        o = fn(*(jnp.asarray(a[i : i + CHUNK]) for a in arrays))
+        outs.append([np.asarray(x) for x in o])
+    return tuple(np.concatenate([o[k] for o in outs])[:B] for k in range(len(outs[0])))
 
 
 class SuperModel:
@@ -91,29 +121,18 @@ class SuperModel:
         self.n = len(data)
         self.use_moment = data.has_moments
         self.set_design(data)
-        # One compiled function per (robot structure, candidate list, design shape),
-        # shared by every SuperModel with that key (robot values are arguments).
-        key = (
+        # Compiled functions are shared by every SuperModel with the same robot
+        # structure, candidate list and moment use (robot values and the design are
+        # arguments); shapes (rows, configurations) are keyed by jit itself.
+        self._key = (
             jax.tree_util.tree_structure(robot),
             tuple(c.label for c in self.candidates),
             self.use_moment,
         )
-        if key not in _COMPILED:
-            one = self._one_res_jac
-
-            # `lax.map`, not `vmap`: batching the equilibrium's while loops over members
-            # makes finished members iterate with the slowest one, and equinox's runtime
-            # checks inside the implicit JVP then fire on those idle iterations (a hang
-            # on CPU); a loop over members has neither problem and compiles the same.
-            def batched(robot, design, P, T, S):
-                return jax.lax.map(lambda a: one(robot, design, *a), (P, T, S))
-
-            _COMPILED[key] = eqx.filter_jit(batched)
-        self._res_jac = _COMPILED[key]
 
     def set_design(self, data: Dataset) -> None:
         """Use the configurations and loads of `data` (same number of rows and of
-        distinct configurations keeps the compiled function)."""
+        distinct configurations keeps the compiled functions)."""
         if len(data) != self.n:
             raise ValueError(f"data must have {self.n} rows, got {len(data)}")
         inv = configuration_groups(data.q)
@@ -139,62 +158,164 @@ class SuperModel:
         return eqx.tree_at(lambda r: r.effects, r, base.effects + effects)
 
     def _predict(self, robot, design, p):
+        """`((n, 3) deflections m, (n,) ok)`: loaded minus unloaded full equilibrium,
+        differentiable in `p` by forward mode (`_equilibrium_x`: implicit-function
+        derivatives whose linear solve never raises, so a failed LM trial point is a
+        flag, not an exception under `vmap`)."""
         r = self.to_robot(p, robot)
         q_all, force, moment, q_u, inv = design
         zero = jnp.zeros(3, p.dtype)
 
-        def loaded(q, f, m):
-            eq = _solve(r, q, f, m if self.use_moment else None, check_stability=False)
-            return _tool_pose(r, q, eq.x)[0], eq.converged
+        def tool(q, f, m):
+            x, ok = _equilibrium_x(r, q, f, m)
+            return _tool_pose(r, q, x)[0], ok
 
-        def unloaded(q):
-            eq = _solve(r, q, zero, None, check_stability=False)
-            return _tool_pose(r, q, eq.x)[0], eq.converged
-
-        p1, ok1 = jax.vmap(loaded)(q_all, force, moment)
-        p0, ok0 = jax.vmap(unloaded)(q_u)
+        p1, ok1 = jax.vmap(lambda q, f, m: tool(q, f, m if self.use_moment else None))(
+            q_all, force, moment
+        )
+        p0, ok0 = jax.vmap(lambda q: tool(q, zero, None))(q_u)
         dp = jax.vmap(lambda q, f, d: observe_effects(r, q, f, d))(q_all, force, p1 - p0[inv])
-        return dp, jnp.all(ok1) & jnp.all(ok0)
+        ok = ok1 & ok0[inv] & jnp.all(jnp.isfinite(dp), axis=1)
+        return jnp.where(ok[:, None], dp, _FAILED), ok
 
-    def _one_res_jac(self, robot, design, p, target, sigma):
-        dp, ok = self._predict(robot, design, p)
-        J = jax.jacfwd(lambda x: self._predict(robot, design, x)[0])(p)  # (n, 3, P)
-        r = ((target - dp) / sigma[:, None]).reshape(-1)
-        Jw = (J / sigma[:, None, None]).reshape(-1, p.shape[0])
-        good = ok & jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(Jw))
-        return r, Jw, dp, good
+    def _compiled(self):
+        if self._key not in _COMPILED:
+            _COMPILED[self._key] = eqx.filter_jit(self._batched)
+        return _COMPILED[self._key]
 
-    def residual_jacobian(self, params, target, sigma):
-        """Batched `(r, J, dp, ok)`: σ-weighted residuals `(target − model)/σ` (B, 3n),
-        the σ-weighted model Jacobian (B, 3n, P), model deflections (B, n, 3) m and a
-        convergence flag (B,). Inputs: params (B, P), target (B, n, 3) m, sigma (B, n) m."""
-        params = np.asarray(params, float)
-        B = params.shape[0]
-        # Fixed chunks: one compile serves every batch size.
-        pad = (-B) % CHUNK
-        idx = np.concatenate([np.arange(B), np.zeros(pad, int)])
-        P_, T_, S_ = params[idx], np.asarray(target, float)[idx], np.asarray(sigma, float)[idx]
-        outs = []
-        for i in range(0, B + pad, CHUNK):
-            sl = slice(i, i + CHUNK)
-            o = self._res_jac(
-                self.robot,
-                self.design,
-                jnp.asarray(P_[sl]),
-                jnp.asarray(T_[sl]),
-                jnp.asarray(S_[sl]),
+    def _one(self, robot, design, scale, p0, sel, mask, target, sigma, fit, max_steps):
+        """One fit (or, with `fit` False, one evaluation) of u = (nominal parameters,
+        the `SLOTS` parameters at indices `sel`), `mask` marking which move.
+
+        Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), ok, steps)`; `Jw` is the
+        σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the result."""
+        nn = self.n_nominal
+        sc = jnp.concatenate([scale[:nn], scale[sel]])
+
+        def embed(u, m):
+            d = m * sc * u
+            return p0.at[:nn].add(d[:nn]).at[sel].add(d[nn:])
+
+        def weighted(u, m):
+            dp, ok = self._predict(robot, design, embed(u, m))
+            return ((target - dp) / sigma[:, None]).reshape(-1), ok
+
+        def r_and_jac(u, m):
+            # Forward mode, one JVP per fitted parameter (≤ 11): the Jacobian is
+            # materialised once per LM step, so LM's linearisation is a plain matrix
+            # product (transposing through the equilibrium's inner solves is not needed).
+            f = lambda v: weighted(v, m)[0]
+            r, J = jax.vmap(lambda e: jax.jvp(f, (u,), (e,)), out_axes=(None, 1))(
+                jnp.eye(u.shape[0], dtype=u.dtype)
             )
-            outs.append([np.asarray(x) for x in o])
-        return tuple(np.concatenate([o[k] for o in outs])[:B] for k in range(4))
+            return r, jnp.where(jnp.isfinite(J), J, 0.0)
+
+        @jax.custom_jvp
+        def residual(u):
+            return weighted(u, mask)[0]
+
+        @residual.defjvp
+        def _residual_jvp(primals, tangents):
+            (u,), (t,) = primals, tangents
+            r, J = r_and_jac(u, mask)
+            return r, J @ t
+
+        u0 = jnp.zeros(nn + SLOTS, p0.dtype)
+
+        def run_fit(_):
+            # Householder QR in plain jnp (`SmallQR`): these fits run vmapped and batched
+            # LAPACK kernels can deadlock XLA's CPU pool (see `jaxcal._dense`).
+            solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL, linear_solver=SmallQR())
+            sol = optx.least_squares(
+                lambda u, _: residual(u),
+                solver,
+                u0,
+                max_steps=max_steps,
+                throw=False,
+                options={"jac": "fwd"},
+            )
+            ok = sol.result == optx.RESULTS.successful
+            return sol.value, ok, jnp.asarray(sol.stats["num_steps"], jnp.int32)
+
+        def no_fit(_):
+            return u0, jnp.array(True), jnp.array(0, dtype=jnp.int32)
+
+        # `fit` is one scalar for the whole batch (not vmapped), so this stays a real
+        # branch: evaluations (predictions, Jacobians for screening) share the compile.
+        u, solved, steps = jax.lax.cond(fit, run_fit, no_fit, None)
+        _, ok = weighted(u, mask)
+        r, Jw = r_and_jac(u, jnp.ones_like(mask))
+        # J is of the residual (target − model)/σ; the model's is its negative.
+        Jw = -Jw / sc[None, :]
+        res = r.reshape(-1, 3) * sigma[:, None]
+        ok = solved & jnp.all(ok) & jnp.all(jnp.isfinite(r))
+        return embed(u, mask), res, jnp.sum(r**2), Jw, ok, steps
+
+    def _batched(self, robot, design, scale, P0, SEL, MASK, T, S, fit, max_steps):
+        return jax.vmap(
+            lambda p, s_, m, t, s: self._one(robot, design, scale, p, s_, m, t, s, fit, max_steps)
+        )(P0, SEL, MASK, T, S)
+
+    def _call(self, start, sel, mask, target, sigma, fit: bool, max_steps: int = MAX_STEPS):
+        fn = self._compiled()
+        scale = jnp.asarray(self.scale)
+        return _chunks(
+            lambda P0, SEL, M, T, S: fn(
+                self.robot, self.design, scale, P0, SEL, M, T, S, jnp.asarray(fit), max_steps
+            ),
+            start.shape[0],
+            start,
+            sel,
+            mask,
+            target,
+            sigma,
+        )
+
+    def _default_sel(self, B: int, chosen=()) -> np.ndarray:
+        """Slot indices: the `chosen` candidate parameters, padded with other distinct
+        parameter indices (masked, so they never move)."""
+        nn, P = self.n_nominal, len(self.names)
+        pool = [i for i in range(nn, P) if i not in chosen]
+        pool += list(range(nn))  # tiny supermodels: fall back to nominal indices
+        sel = list(chosen) + pool[: SLOTS - len(chosen)]
+        return np.tile(np.asarray(sel, int), (B, 1))
 
     def predict(self, params) -> tuple[np.ndarray, np.ndarray]:
         """Model deflections (B, n, 3) m and flags (B,) for parameter vectors (B, P)."""
         params = np.atleast_2d(np.asarray(params, float))
-        B = params.shape[0]
-        _, _, dp, ok = self.residual_jacobian(
-            params, np.zeros((B, self.n, 3)), np.ones((B, self.n))
+        B, nn = params.shape[0], self.n_nominal
+        out = self._call(
+            params,
+            self._default_sel(B),
+            np.zeros((B, nn + SLOTS)),
+            np.zeros((B, self.n, 3)),
+            np.ones((B, self.n)),
+            fit=False,
         )
-        return dp, ok
+        return -out[1], out[4]
+
+    def jacobian(self, params, sigma) -> np.ndarray:
+        """σ-weighted Jacobian of the model w.r.t. *every* parameter, (B, 3n, P), at
+        parameter vectors (B, P); `sigma` (B, n) m."""
+        params = np.atleast_2d(np.asarray(params, float))
+        B, nn, P = params.shape[0], self.n_nominal, len(self.names)
+        sigma = np.broadcast_to(np.asarray(sigma, float), (B, self.n))
+        groups = [list(range(i, min(i + SLOTS, P))) for i in range(nn, P, SLOTS)] or [[]]
+        rows = [(b, g) for b in range(B) for g in groups]
+        sel = np.concatenate([self._default_sel(1, tuple(g)) for _, g in rows])
+        out = self._call(
+            params[[b for b, _ in rows]],
+            sel,
+            np.zeros((len(rows), nn + SLOTS)),
+            np.zeros((len(rows), self.n, 3)),
+            sigma[[b for b, _ in rows]],
+            fit=False,
+        )
+        J = np.zeros((B, 3 * self.n, P))
+        for j, (b, g) in enumerate(rows):
+            J[b][:, :nn] = out[3][j][:, :nn]
+            J[b][:, g] = out[3][j][:, nn : nn + len(g)]
+        return J
 
     # -- fitting -----------------------------------------------------------------------
 
@@ -205,90 +326,48 @@ class SuperModel:
         target: np.ndarray,
         sigma: np.ndarray,
         *,
-        max_steps: int = 20,
-        rtol: float = 1e-6,
-        progress=None,
+        max_steps: int = MAX_STEPS,
     ) -> BatchFit:
-        """Levenberg–Marquardt for a batch of fits, each with its own free set.
+        """Batched fits: optimistix Levenberg–Marquardt of the nominal parameters plus,
+        per member, the (at most `SLOTS`) parameters marked in `free` beyond the nominal
+        ones (every member must free the nominal parameters). The free set is a traced
+        mask, so one compile serves the nominal fit and every candidate.
 
-        Batched on the host around the one compiled residual-and-Jacobian function:
-        every step evaluates `(r, J)` for all members in one call and solves each
-        member's damped normal equations `(JᵀJ + λ·diag(JᵀJ)) δ = −Jᵀr` over its free
-        parameters (scaled to unit diagonal; a Cholesky solve of a positive definite
-        matrix, never an inverse). A step that raises χ² is undone and λ grows tenfold;
-        an accepted one shrinks λ tenfold. A member stops when an accepted step lowers
-        χ² by less than `rtol`·χ² (+1e-6). One compile serves the nominal fit, every
-        candidate and every seed; per-member free sets could not share a compiled
-        `optimistix` solve (its free set is static), which is why the loop is here.
+        `start` (B, P) or (P,) user units; `free` (B, P) or (P,) bool; `target`
+        (B, n, 3) m; `sigma` (B, n) or (n,) m.
         """
-        P = start.shape[-1]
         target = np.asarray(target, float)
-        start = np.array(np.broadcast_to(start, target.shape[:1] + (P,)), float)
-        free = np.array(np.broadcast_to(free, start.shape), bool)
-        B = start.shape[0]
-        sigma = np.broadcast_to(sigma, (B, self.n))
-        x = start.copy()
-        r, J, _, ok = self.residual_jacobian(x, target, sigma)
-        chi2 = np.sum(r**2, 1)
-        lam = np.full(B, 1e-3)
-        active = ok.copy()
-        steps = np.zeros(B, int)
-        best = (x.copy(), r.copy(), J.copy(), ok.copy(), chi2.copy())
-        for _ in range(max_steps):
-            if not active.any():
-                break
-            trial = best[0].copy()
-            for b in np.flatnonzero(active):
-                idx = np.flatnonzero(free[b])
-                Jb = best[2][b][:, idx]
-                N = Jb.T @ Jb
-                d = np.sqrt(np.diag(N))
-                d = np.where(d > 0, d, 1.0)
-                Ns = N / np.outer(d, d)
-                g = -(Jb.T @ best[1][b]) / d
-                # J is ∂model/∂p, r = target − model: the GN step solves (JᵀJ)δ = Jᵀr.
-                A = Ns + lam[b] * np.eye(len(idx))
-                try:
-                    L = np.linalg.cholesky(A)
-                except np.linalg.LinAlgError:
-                    lam[b] *= 10.0
-                    continue
-                delta = -np.linalg.solve(L.T, np.linalg.solve(L, g)) / d
-                trial[b, idx] += delta
-            # Only members still iterating are evaluated.
-            act = np.flatnonzero(active)
-            r_t, J_t = best[1].copy(), best[2].copy()
-            chi2_t = np.full(B, np.inf)
-            ra, Ja, _, oka = self.residual_jacobian(trial[act], target[act], sigma[act])
-            r_t[act], J_t[act] = ra, Ja
-            chi2_t[act] = np.where(oka, np.sum(ra**2, 1), np.inf)
-            for b in act:
-                if chi2_t[b] <= best[4][b]:
-                    gain = best[4][b] - chi2_t[b]
-                    best[0][b], best[1][b], best[2][b] = trial[b], r_t[b], J_t[b]
-                    best[4][b] = chi2_t[b]
-                    steps[b] += 1
-                    # A small gain means convergence only for a (nearly) Gauss-Newton
-                    # step; a heavily damped step gains little anywhere.
-                    if gain <= rtol * chi2_t[b] + 1e-6 and lam[b] <= 1e-2:
-                        active[b] = False
-                    lam[b] = max(lam[b] / 10.0, 1e-9)
-                else:
-                    lam[b] *= 10.0
-                    if lam[b] > 1e8:
-                        active[b] = False
-            if progress is not None:
-                progress(int(active.sum()))
-        x, r, J, ok, chi2 = best
+        B = target.shape[0]
+        P = len(self.names)
+        start = np.array(np.broadcast_to(start, (B, P)), float)
+        free = np.array(np.broadcast_to(free, (B, P)), bool)
+        sigma = np.array(np.broadcast_to(sigma, (B, self.n)), float)
+        nn = self.n_nominal
+        if not free[:, :nn].all():
+            raise ValueError("free must include every nominal parameter")
+        extra = free[:, nn:].sum(axis=1)
+        if extra.max(initial=0) > SLOTS:
+            raise ValueError(f"at most {SLOTS} candidate parameters can be freed per fit")
+        sel = np.concatenate(
+            [self._default_sel(1, tuple(np.flatnonzero(free[b, nn:]) + nn)) for b in range(B)]
+        )
+        mask = np.zeros((B, nn + SLOTS))
+        mask[:, :nn] = 1.0
+        mask[:, nn:] = np.arange(SLOTS)[None, :] < extra[:, None]
+        p, res, chi2, Jw, ok, steps = self._call(
+            start, sel, mask, target, sigma, fit=True, max_steps=max_steps
+        )
+        jac = np.zeros((B, 3 * self.n, P))
         cov = np.zeros((B, P, P))
         well = np.zeros(B, bool)
         for b in range(B):
-            idx = np.flatnonzero(free[b])
-            c, w = _covariance(J[b][:, idx])
-            cov[b][np.ix_(idx, idx)] = c
+            cols = np.concatenate([np.arange(nn), sel[b][: extra[b]]]).astype(int)
+            jb = np.concatenate([Jw[b][:, :nn], Jw[b][:, nn : nn + extra[b]]], axis=1)
+            jac[b][:, cols] = jb
+            c, w = _covariance(jb)
+            cov[b][np.ix_(cols, cols)] = c
             well[b] = w
-        res = (r.reshape(B, self.n, 3)) * sigma[:, :, None]
-        return BatchFit(x, free, chi2, res, J, cov, ok & well, steps)
+        return BatchFit(p, free, chi2, res, jac, cov, ok & well, steps)
 
 
 #: Relative eigenvalue floor of the unit-diagonal normal matrix below which a fit is
@@ -297,6 +376,9 @@ RCOND = 1e-12
 
 
 def _covariance(J: np.ndarray) -> tuple[np.ndarray, bool]:
+    """`(JᵀJ)⁻¹` on the host (numpy, outside jit) and whether it is well posed: the
+    Jacobi-scaled normal matrix must pass the eigenvalue test; never inverts a singular
+    matrix (NaN instead)."""
     N = J.T @ J
     d = np.sqrt(np.diag(N))
     if not np.all(d > 0) or not np.all(np.isfinite(N)):

@@ -45,13 +45,13 @@ Every candidate is "absent" at parameter 0, so the nominal model plus all candid
 is one model (`SuperModel`); turning one parameter on hides that effect. A lost motion
 of 60 µrad in joint 1 moves the tool sideways by ~0.1 mm under horizontal loads only.
 
-For speed we screen 8 candidates here (the notebook's time, 30–50 s on 2 cores, is
-mostly the one compile of the model); the command line `jaxcal discover` screens all 16.""",
+For speed we try 5 candidates here, none with extra deflection variables (the
+notebook's time is mostly the one compile of the model, which grows with them); the
+command line `jaxcal discover` tries all 17 (`default_candidates`).""",
     ),
     (
         "code",
-        """keep = {"link_bending[2]", "link_bending[3]", "backlash[1]", "backlash[2]",
-        "joint_nonlinearity[1]", "joint_nonlinearity[2]", "tool_compliance",
+        """keep = {"backlash[1]", "backlash[3]", "joint_nonlinearity[1]", "joint_nonlinearity[3]",
         "tracker_rotation"}
 cands = tuple(c for c in default_candidates(robot) if c.label in keep)
 sm = SuperModel(robot, cands, design)
@@ -112,18 +112,33 @@ print(json.dumps(rep.to_json() | {"candidates": "..."}, indent=1))""",
         "md",
         """## How reliable is it? The seeds study
 
-`notebooks/_discrepancy_study.py` hides each candidate (sized so that the gap it leaves
-after the nominal refit is 5 σ in its largest row) in 10 noise seeds, plus 10 seeds with
-no effect, and runs the full workflow (all 16 candidates) on each. It takes a few
-minutes, so this notebook loads its precomputed output
-`05_discrepancy_study.json` (tests/test_discrepancy.py runs the same study).""",
+`notebooks/_discrepancy_study.py` hides each candidate — every joint of backlash and
+joint nonlinearity, both link bendings, tool compliance, and the compensator on a robot
+file that declares none — in 10 noise seeds, plus 10 seeds with no effect, and runs the
+full workflow (all candidates) on each. It takes minutes, so this notebook loads its
+precomputed output `05_discrepancy_study.json` (tests/test_discrepancy.py runs the same
+workflow on the first 3 seeds of every case).
+
+**How big is a hidden effect?** Each effect is sized by the *gap it leaves*: the largest
+row residual, after the nominal model (every compliance and the compensator
+re-identified) is refitted to noise-free data containing the effect, is 5 σ. Sizing by
+the raw effect instead (its largest row before any refit) would hide mostly what the
+re-identified compliances absorb: link bending about the axis parallel to the joint
+axes looks like a softer joint 2 or 3 with these loads, and a nonlinear joint like a
+linear one of a different stiffness. An effect that the re-identified nominal
+parameters reproduce to the noise is not a discrepancy — the calibrated nominal model
+already predicts those data — so the gap, not the raw size, is what the workflow can and
+should detect. The table below gives each case's raw size (`raw_sigma`) at a 5 σ gap:
+the raw effects are larger, some well beyond 10 σ. Sized by the raw effect at 8 σ
+instead, link bending of the upper arm was named in 2 of 10 seeds and of the lower arm
+in 6 of 10 (previous session's measurement).""",
     ),
     (
         "code",
         """study = json.load(open("05_discrepancy_study.json"))
 cases, labels = study["cases"], study["labels"]
 M = np.array([[study["named"][c].count(l) for l in labels] for c in cases])
-fig, ax = plt.subplots(figsize=(8, 4.2))
+fig, ax = plt.subplots(figsize=(9, 6.5))
 ax.imshow(M, cmap="Blues")
 ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=8)
 ax.set_yticks(range(len(cases)), cases, fontsize=8)
@@ -137,8 +152,20 @@ fig.tight_layout(); plt.show()
 for c in cases:
     x = np.array(study["chi2_red_after"][c])
     n_ok = study["named"][c].count(c)
-    print(f"{c:24s} correct {n_ok}/10  χ²_red after {x.min():.2f}..{x.max():.2f}")
+    raw = study.get("raw_sigma", {}).get(c)
+    raw = "" if raw is None else f"  raw size {raw:.1f} σ"
+    print(f"{c:24s} correct {n_ok}/10  χ²_red after {x.min():.2f}..{x.max():.2f}{raw}")
 print(f"study time {study['seconds_total']:.0f} s")""",
+    ),
+    (
+        "md",
+        """**Not yet met:** backlash and stiffness nonlinearity of **joint 2** are named in
+only 1 and 2 of 10 seeds (they come out as `none`). Joint 2 carries gravity and the
+compensator spring, whose three re-identified parameters (k2, Kc, Kc·s0) absorb most of
+either effect: the backlash fit is not among the three best-screened candidates and
+the nonlinearity fit often exhausts its LM step budget. Every other candidate and joint,
+the wrist joints included, is named in at least 9 of 10 seeds, and with the named
+effect χ²_red lies inside 1 ± 3·sqrt(2/ν) ≈ 1 ± 0.36.""",
     ),
 ]
 
