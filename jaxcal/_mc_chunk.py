@@ -1,0 +1,118 @@
+"""One compiled Monte-Carlo chunk: per-trial noise from the global trial index, the
+vmapped identification, and the chunk's sufficient statistics (see `_montecarlo`).
+
+The trial axis is sharded over a device mesh; only the reductions communicate."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+from jaxtyping import Array, Float
+
+__all__ = ["ChunkOut", "make_chunk_fn", "trial_noise"]
+
+
+def trial_noise(
+    key: Array,
+    index: Array,
+    sigma: Float[Array, " n"],
+    student_t: float | None = None,
+) -> Float[Array, "n 3"]:
+    """Noise (m) of trial `index` (global trial number, any non-negative integer):
+    `σ_row · z` with z standard normal, or Student-t with `student_t` = ν degrees of
+    freedom scaled to unit variance (ν > 2). The key of the trial is
+    `fold_in(fold_in(key, index // 2³²), index mod 2³²)`: independent of how trials are
+    chunked or sharded."""
+    index = jnp.asarray(index, jnp.int64)
+    hi = (index >> 32).astype(jnp.uint32)
+    lo = (index & 0xFFFFFFFF).astype(jnp.uint32)
+    k = jax.random.fold_in(jax.random.fold_in(key, hi), lo)
+    shape = (sigma.shape[0], 3)
+    if student_t is None:
+        z = jax.random.normal(k, shape, sigma.dtype)
+    else:
+        nu = float(student_t)
+        z = jax.random.t(k, nu, shape, sigma.dtype) * math.sqrt((nu - 2.0) / nu)
+    return z * sigma[:, None]
+
+
+class ChunkOut(NamedTuple):
+    n: Array
+    failed: Array
+    mean: Array
+    m2: Array
+    covered: Array
+    std_sum: Array
+    hist: Array | None
+    est: Array | None
+    ok: Array | None
+    nf_est: Array
+    nf_std: Array
+    nf_ok: Array
+
+
+def make_chunk_fn(
+    fit: Callable,
+    chunk: int,
+    mesh: Mesh,
+    student_t: float | None,
+    keep: bool,
+    bins: int | None,
+):
+    trial_spec = NamedSharding(mesh, P("trials"))
+
+    def run(key, start, total, d0, sigma, true, force, moment):
+        # The noise-free fit: its estimate is the method's limit (model bias) and its
+        # covariance the design's analytic one (unbatched; negligible next to a chunk).
+        nf_est, nf_std, _, _, nf_ok = fit(d0, sigma, force, moment)
+        idx = start + jnp.arange(chunk, dtype=jnp.int64)
+        # The trial axis is split over the devices; everything per trial (noise,
+        # identification) is independent, so only the reductions below communicate.
+        idx = jax.lax.with_sharding_constraint(idx, trial_spec)
+        noise = jax.vmap(lambda i: trial_noise(key, i, sigma, student_t))(idx)
+        est, std, lo, hi, ok = jax.vmap(lambda e: fit(d0 + e, sigma, force, moment))(noise)
+        ok = ok & jnp.all(jnp.isfinite(est), axis=1) & jnp.all(jnp.isfinite(std), axis=1)
+        valid = idx < total
+        w = valid & ok
+        n = jnp.sum(w)
+        wf = w.astype(est.dtype)[:, None]
+        est0 = jnp.where(w[:, None], est, 0.0)
+        mean = jnp.sum(wf * est0, axis=0) / jnp.maximum(n, 1)
+        m2 = jnp.sum(wf * (est0 - mean) ** 2, axis=0)
+        inside = (lo <= true) & (true <= hi) & w[:, None]
+        covered = jnp.sum(inside, axis=0)
+        std_sum = jnp.sum(jnp.where(w[:, None], std, 0.0), axis=0)
+        failed = jnp.sum(valid & ~ok)
+        hist = None
+        if bins is not None:
+            lo_edge = nf_est - 6.0 * nf_std
+            width = 12.0 * nf_std / bins
+            b = jnp.floor((est0 - lo_edge) / width).astype(jnp.int32)
+            b = jnp.clip(b, -1, bins) + 1
+            cols = jnp.broadcast_to(jnp.arange(est.shape[1]), b.shape)
+            hist = (
+                jnp.zeros((est.shape[1], bins + 2), jnp.int64)
+                .at[cols, b]
+                .add(w[:, None].astype(jnp.int64))
+            )
+        return ChunkOut(
+            n,
+            failed,
+            mean,
+            m2,
+            covered,
+            std_sum,
+            hist,
+            est if keep else None,
+            w if keep else None,
+            nf_est,
+            nf_std,
+            nf_ok,
+        )
+
+    return jax.jit(run)
