@@ -277,22 +277,7 @@ def main() -> None:
     )
 
     # --- baseline 2: SLSQP + FD on the jitted jaxcal criterion ------------------------
-    t = time.perf_counter()
-    f_jit2 = jax.jit(lambda q: jnp.log(design_objective(P, q)))  # fresh: compile counted
-    c_jit2 = jax.jit(lambda q: -constraint_values(robot, q)[:, 1:].T.reshape(-1))
-    f_jit2(jnp.asarray(q0s[0])).block_until_ready()
-    c_jit2(jnp.asarray(q0s[0])).block_until_ready()
-    t_compile = time.perf_counter() - t
-    best_jx, t_jx, nfev_jx = slsqp(
-        "SLSQP/jit",
-        lambda q: float(f_jit2(jnp.asarray(q))),
-        lambda q: np.asarray(c_jit2(jnp.asarray(q))),
-        q0s,
-        lo,
-        hi,
-        m,
-    )
-    t_jx += t_compile
+    best_jx, t_jx, nfev_jx = slsqp_jitted("SLSQP/jit", robot, P, q0s, lo, hi, m)
 
     rows = [
         ("jaxcal BFGS + autodiff, first call (compile + run)", d.value, t_first),
@@ -315,6 +300,27 @@ def main() -> None:
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
 
 
+def slsqp_jitted(label, robot, P, q0s, lo, hi, m):
+    """SLSQP with finite differences on jaxcal's jitted criterion; the compilation of the
+    (fresh) jitted criterion and constraints is counted in the wall time."""
+    t = time.perf_counter()
+    f_jit = jax.jit(lambda q: jnp.log(design_objective(P, q)))
+    c_jit = jax.jit(lambda q: -constraint_values(robot, q)[:, 1:].T.reshape(-1))
+    f_jit(jnp.asarray(q0s[0])).block_until_ready()
+    c_jit(jnp.asarray(q0s[0])).block_until_ready()
+    t_compile = time.perf_counter() - t
+    best, t_run, nfev = slsqp(
+        label,
+        lambda q: float(f_jit(jnp.asarray(q))),
+        lambda q: np.asarray(c_jit(jnp.asarray(q))),
+        q0s,
+        lo,
+        hi,
+        m,
+    )
+    return best, t_run + t_compile, nfev
+
+
 def full_part(robot, m, a, lo, hi) -> None:
     """Part 2: the default (full-model) problem, jaxcal vs SLSQP + FD on the jitted
     full-model criterion, from the same starting designs."""
@@ -327,23 +333,8 @@ def full_part(robot, m, a, lo, hi) -> None:
         flush=True,
     )
     P = DesignProblem(robot, m)
-    t = time.perf_counter()
-    f_jit = jax.jit(lambda q: jnp.log(design_objective(P, q)))
-    c_jit = jax.jit(lambda q: -constraint_values(robot, q)[:, 1:].T.reshape(-1))
     q0s = random_designs(robot, a.full_slsqp_starts, m, seed=a.seed, margin=2e-3)
-    f_jit(jnp.asarray(q0s[0])).block_until_ready()
-    c_jit(jnp.asarray(q0s[0])).block_until_ready()
-    t_compile = time.perf_counter() - t
-    best, t_s, nfev = slsqp(
-        "SLSQP/jit full",
-        lambda q: float(f_jit(jnp.asarray(q))),
-        lambda q: np.asarray(c_jit(jnp.asarray(q))),
-        q0s,
-        lo,
-        hi,
-        m,
-    )
-    t_s += t_compile
+    best, t_s, nfev = slsqp_jitted("SLSQP/jit full", robot, P, q0s, lo, hi, m)
     k = a.full_slsqp_starts
     print(f"\n{'method (full model)':62s} {'best O1':>9s} {'wall s':>8s}")
     for name, v, w in (
