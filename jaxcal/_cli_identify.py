@@ -7,6 +7,7 @@ import sys
 import warnings
 
 from ._cli import add_robot_argument, print_json
+from ._identify import METHODS
 
 
 def register(sub) -> None:
@@ -27,7 +28,7 @@ def register(sub) -> None:
     add_robot_argument(p)
     p.add_argument(
         "--method",
-        choices=("linear", "two-step", "nonlinear"),
+        choices=METHODS,
         default="nonlinear",
         help="identification method (default: nonlinear)",
     )

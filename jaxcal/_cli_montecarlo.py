@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from ._cli import add_robot_argument, print_json
+from ._identify import METHODS
 
 
 def register(sub) -> None:
@@ -26,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("--trials", type=int, default=10_000, metavar="N", help="default 10000")
     p.add_argument(
         "--method",
-        choices=("linear", "two-step", "nonlinear"),
+        choices=METHODS,
         default="linear",
         help="identification method (default linear)",
     )

@@ -33,6 +33,7 @@ import numpy as np
 from jax.sharding import Mesh
 from jaxtyping import Array, Float
 
+from ._identify import METHODS
 from ._io import Dataset
 from ._mc_chunk import ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn, trial_noise
 from ._mc_methods import TrialFit, trial_fit
@@ -48,7 +49,6 @@ __all__ = [
     "METHODS",
 ]
 
-METHODS = ("linear", "two-step", "nonlinear")
 
 # Chunk sizes (trials) by method: large enough to amortise dispatch, small enough for
 # memory (linear: ~40 floats per trial; nonlinear: Jacobians of every Newton step).

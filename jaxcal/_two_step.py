@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._dense import cho_solve, cholesky
+from ._dense import cho_solve, cholesky, eigvalsh
 from ._ident_result import IdentificationResult, free_mask, make_result
 from ._io import Dataset
 from ._lsq import RCOND, LinearFactor, linear_factor, linear_solve_factored
@@ -110,27 +110,6 @@ def two_step_system(robot: Robot, data: Dataset, *, free=None, exact: bool = Tru
     )
 
 
-def _eigvalsh3(A: Float[Array, "3 3"]) -> Float[Array, 3]:
-    """Ascending eigenvalues of a symmetric 3×3 matrix in closed form (trigonometric
-    solution of the characteristic cubic), without a LAPACK call."""
-    q = jnp.trace(A) / 3.0
-    p1 = A[0, 1] ** 2 + A[0, 2] ** 2 + A[1, 2] ** 2
-    p2 = (A[0, 0] - q) ** 2 + (A[1, 1] - q) ** 2 + (A[2, 2] - q) ** 2 + 2.0 * p1
-    p = jnp.sqrt(p2 / 6.0)
-    ps = jnp.where(p > 0, p, 1.0)
-    B = (A - q * jnp.eye(3, dtype=A.dtype)) / ps
-    det = (
-        B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
-        - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
-        + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0])
-    )
-    r = jnp.clip(det / 2.0, -1.0, 1.0)
-    phi = jnp.arccos(r) / 3.0
-    e_max = q + 2.0 * p * jnp.cos(phi)
-    e_min = q + 2.0 * p * jnp.cos(phi + 2.0 * jnp.pi / 3.0)
-    return jnp.stack([e_min, 3.0 * q - e_max - e_min, e_max])
-
-
 def _step2(sys: TwoStepSystem, theta1, cov1):
     """Map the step-1 estimate (free entries) to `[k1..k6, Kc, s0]` (user units)."""
     m = sys.q2.shape[0]
@@ -170,7 +149,7 @@ def solve_two_step(system: TwoStepSystem, deflection: Float[Array, "n 3"]) -> Id
     G = jax.jacfwd(lambda t: _step2(system, t, cov1)[0])(theta1)
     cov = G @ cov1 @ G.T
     cov = 0.5 * (cov + cov.T)
-    lam = _eigvalsh3(jnp.where(jnp.isfinite(N), N, 0.0))
+    lam = eigvalsh(jnp.where(jnp.isfinite(N), N, 0.0))
     well2 = lam[0] > RCOND * lam[-1]
     # Residuals of the linear model at the final parameters (compensator aggregated, eq. 10).
     k = params[:6]
