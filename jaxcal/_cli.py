@@ -30,6 +30,24 @@ def add_robot_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_fix_argument(p: argparse.ArgumentParser, why: str) -> None:
+    """`--fix NAME`, repeatable and comma-separated alike (`--fix k1 --fix s0` or
+    `--fix k1,s0`), the same in every command; `why` ends the help text."""
+    p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="hold a parameter at the robot's value (k1 or k1_urad_per_Nm, Kc, s0, ...); "
+        f"repeatable or comma-separated; {why}",
+    )
+
+
+def fix_names(values: Sequence[str]) -> list[str]:
+    """The parameter names given with `--fix` (flattening comma lists)."""
+    return [s.strip() for v in values for s in v.split(",") if s.strip()]
+
+
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     """A plain-text table with right-aligned numbers and left-aligned text."""
     cells = [[str(h) for h in headers]] + [[_cell(v) for v in r] for r in rows]

@@ -14,12 +14,12 @@ def register(sub) -> None:
         help="find the physical effect the nominal model misses in measured data (or none)",
         description=(
             "Fit the nominal model (compliances and compensator re-identified, geometry "
-            "trusted), test its residuals against the stated noise, then fit every "
+            "trusted), test its residuals against the stated noise, then screen every "
             "candidate effect (compensator, link bending, backlash, joint nonlinearity, "
-            "tool compliance, and a tracker-rotation decoy) with the full equilibrium "
-            "model and choose one only if it is decisively better (ΔBIC ≥ 10) and lowers "
-            "the leave-one-configuration-out error. Prints the effect, its parameters "
-            "and the gap before and after."
+            "tool compliance, and a tracker-rotation decoy), fit the best K with the full "
+            "equilibrium model and choose one only if it is decisively better (ΔBIC ≥ 10) "
+            "and lowers the leave-one-configuration-out error. Prints the effect, its "
+            "parameters and the gap before and after."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")

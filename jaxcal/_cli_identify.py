@@ -6,7 +6,7 @@ import argparse
 import sys
 import warnings
 
-from ._cli import add_robot_argument, print_json
+from ._cli import add_fix_argument, add_robot_argument, fix_names, print_json
 from ._identify import METHODS
 
 
@@ -32,14 +32,7 @@ def register(sub) -> None:
         default="nonlinear",
         help="identification method (default: nonlinear)",
     )
-    p.add_argument(
-        "--fix",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="hold a parameter at the robot's value (k1 or k1_urad_per_Nm, Kc, s0, ...); "
-        "repeatable",
-    )
+    add_fix_argument(p, "for a parameter the data cannot identify")
     p.add_argument(
         "--robust", action="store_true", help="Huber loss (down-weights outliers; nonlinear only)"
     )
@@ -66,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = identify(robot, data, args.method, fix=tuple(args.fix), robust=args.robust)
+        res = identify(robot, data, args.method, fix=tuple(fix_names(args.fix)), robust=args.robust)
     for w in caught:
         print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
     if args.json:

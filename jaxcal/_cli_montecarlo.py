@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._cli import add_robot_argument, print_json
+from ._cli import add_fix_argument, add_robot_argument, fix_names, print_json
 from ._identify import METHODS
 
 
@@ -55,19 +55,14 @@ def register(sub) -> None:
         metavar="N",
         help="trials per compiled step (memory bound; default by method)",
     )
-    p.add_argument(
-        "--fix",
-        default=None,
-        metavar="NAMES",
-        help="comma-separated parameters to hold at the robot's values, e.g. k1 when the "
-        "design cannot identify k1_urad_per_Nm (vertical loads only)",
-    )
+    add_fix_argument(p, "e.g. k1 when the design cannot identify it (vertical loads only)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ._ident_result import resolve_name
     from ._io import read_dataset
     from ._montecarlo import monte_carlo
     from ._robot import load_robot
@@ -81,15 +76,10 @@ def run(args: argparse.Namespace) -> int:
     free = None
     if args.fix:
         names = robot.parameter_names
-        fixed = set()
-        for s in (s.strip() for s in args.fix.split(",") if s.strip()):
-            match = [n for n in names if s in (n, n.split("_")[0])]
-            if not match:
-                raise ValueError(
-                    f"--fix: unknown parameter {s!r}; choose from {', '.join(names)} "
-                    "(with or without the unit suffix)"
-                )
-            fixed.add(match[0])
+        try:
+            fixed = {resolve_name(s, names) for s in fix_names(args.fix)}
+        except ValueError as e:
+            raise ValueError(f"--fix: {e}") from None
         free = [n for n in names if n not in fixed]
     res = monte_carlo(
         robot,

@@ -50,7 +50,7 @@ SLOTS = 3
 #: change of 1e-5 of a parameter's typical size is far below its statistical uncertainty.
 RTOL = ATOL = 1e-5
 #: LM step budget (static: one value, one compile; fits that hit it are flagged).
-MAX_STEPS = 32
+MAX_STEPS = 64
 
 
 def configuration_groups(q) -> np.ndarray:

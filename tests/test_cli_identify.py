@@ -98,3 +98,12 @@ def test_demo_json(capsys):
     ]
     # one seed: every |z| < 4 fails with probability < 8·6e-5 if the stds are honest
     assert np.all(np.abs(z) < 4), z
+
+
+@pytest.mark.parametrize("command", ["identify", "montecarlo"])
+def test_fix_is_repeatable_and_comma_separated_in_every_command(command):
+    from jaxcal._cli import build_parser, fix_names
+
+    args = build_parser().parse_args([command, "x.csv", "--fix", "k1, s0", "--fix", "Kc"])
+    assert fix_names(args.fix) == ["k1", "s0", "Kc"]
+    assert fix_names(build_parser().parse_args([command, "x.csv"]).fix) == []

@@ -157,11 +157,15 @@ def test_press_equals_refitting_without_each_group():
 # -- the seeds study ----------------------------------------------------------------------
 
 EFFECTS = [c for c in STUDY.CASES if c != "none"]
-#: Cases the workflow does not yet name (measured: 0/3 and 1/3 seeds). Both are joint 2,
-#: whose spring is loaded by gravity and the compensator: the backlash fit is not among
-#: the three best-screened candidates (its secant screen gains ΔBIC ≈ −2) and the
-#: nonlinearity fit does not converge within the LM step budget. strict: a fix shows.
-NOT_MET = {"backlash[2]", "joint_nonlinearity[2]"}
+#: Cases the workflow does not yet name (10-seed study: 0–1 of 10). Joint 2 is preloaded
+#: by gravity and the compensator, so its unloaded state sits near the dead band, and
+#: which configurations lie inside the band depends on the weakly determined Kc, Kc·s0:
+#: the χ² profile over the half-width (nominal parameters refitted at each fixed value)
+#: is rugged — local minima ~70 apart on data without any effect — and Levenberg–
+#: Marquardt from the nominal optimum or the robot file's values does not reach the
+#: optimum that a start at the true values finds (Δχ² 67–105 over the nominal fit).
+#: strict: a fix shows.
+NOT_MET = {"backlash[2]"}
 
 
 def _case(case):
@@ -266,3 +270,32 @@ def test_discover_rejects_float32_and_missing_deflections(robot, example):
     with pytest.raises(ValueError, match="no deflections"):
         jaxcal_discover = __import__("jaxcal._discrepancy", fromlist=["discover"]).discover
         jaxcal_discover(robot, example.with_deflection(None))
+
+
+#: Named, but its size is not recovered (measured: hardening 0.0025 ± 0.0021 fitted,
+#: 0.0154 true, z = −6.2 on seed 0; 10-seed χ²_red after 0.10–0.21 above the same seed's
+#: no-effect value). The fit stops in a local minimum of the same rugged Kc, Kc·s0
+#: landscape as backlash[2]: started at the true values it reaches a χ² 15–33 lower.
+SIZE_NOT_RECOVERED = {"joint_nonlinearity[2]"}
+
+
+def _size_case(case):
+    if case in SIZE_NOT_RECOVERED:
+        return pytest.param(
+            case, marks=pytest.mark.xfail(strict=True, reason="joint 2: local minimum")
+        )
+    return _case(case)
+
+
+@pytest.mark.parametrize("case", [_size_case(c) for c in EFFECTS])
+def test_named_effect_size_is_recovered(study, case):
+    # At the likelihood optimum with an honest covariance, z = (fitted − true)/std of each
+    # effect parameter is close to N(0, 1): |z| ≥ 4 has probability 6e-5 per parameter,
+    # ~0.5 % over the ~100 tested here. Naming an effect is not enough: its size must be
+    # right too.
+    truth = np.atleast_1d(study[case]["truth"])
+    for r in study[case]["reports"]:
+        fitted = list(r.params.values())
+        assert len(fitted) == len(truth)
+        z = [(v - t) / sd for (v, sd), t in zip(fitted, truth, strict=True)]
+        assert np.all(np.abs(z) < 4), (case, fitted, truth)
