@@ -157,13 +157,14 @@ def test_press_equals_refitting_without_each_group():
 # -- the seeds study ----------------------------------------------------------------------
 
 EFFECTS = [c for c in STUDY.CASES if c != "none"]
-#: Cases the workflow does not yet name (10-seed study: 0–1 of 10). Joint 2 is preloaded
+#: Cases the workflow does not yet name (10-seed study: 0 of 10). Joint 2 is preloaded
 #: by gravity and the compensator, so its unloaded state sits near the dead band, and
 #: which configurations lie inside the band depends on the weakly determined Kc, Kc·s0:
 #: the χ² profile over the half-width (nominal parameters refitted at each fixed value)
 #: is rugged — local minima ~70 apart on data without any effect — and Levenberg–
-#: Marquardt from the nominal optimum or the robot file's values does not reach the
-#: optimum that a start at the true values finds (Δχ² 67–105 over the nominal fit).
+#: Marquardt from the nominal optimum (or, tried too, from the robot file's values) does
+#: not reach the optimum that a start at the true values finds (Δχ² 67–105 below the
+#: nominal fit).
 #: strict: a fix shows.
 NOT_MET = {"backlash[2]"}
 
@@ -291,8 +292,8 @@ def _size_case(case):
 def test_named_effect_size_is_recovered(study, case):
     # At the likelihood optimum with an honest covariance, z = (fitted − true)/std of each
     # effect parameter is close to N(0, 1): |z| ≥ 4 has probability 6e-5 per parameter,
-    # ~0.5 % over the ~100 tested here. Naming an effect is not enough: its size must be
-    # right too.
+    # 0.3 % over the 45 tested here (14 cases × 3 seeds; the compensator has two).
+    # Naming an effect is not enough: its size must be right too.
     truth = np.atleast_1d(study[case]["truth"])
     for r in study[case]["reports"]:
         fitted = list(r.params.values())
