@@ -213,8 +213,8 @@ class Candidate:
     - `words(values, stds)`: the effect in a sentence.
     - `screen_size`: for a one-parameter effect whose derivative at "absent" does not
       show it (a dead band hidden by a preload), the size at which the workflow's
-      screening takes a secant instead of the tangent at 0 (also the fit's start when
-      the linear step is unphysical).
+      screening takes a secant instead of the tangent at 0 (also where its full fit
+      starts).
     """
 
     name: str

@@ -134,11 +134,6 @@ def discover_batch(
             rr = r - nom_jac[s][:, cols] @ delta
             lin[s, i] = nom.chi2[s] - float(rr @ rr)
             lin_delta[s, i, cols] = delta
-            size = cands[i].screen_size
-            if size is not None and not cands[i].physical(delta[-1:]):
-                # An unphysical linear step of an effect screened by its secant: start
-                # the full fit at the screening size instead.
-                lin_delta[s, i, sm.slices[i]] = size
     k = np.array([c.n_params for c in cands])
     lin_dbic = lin - k[None] * lnN
     K = min(refine, len(cands))
