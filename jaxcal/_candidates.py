@@ -215,6 +215,10 @@ class Candidate:
       show it (a dead band hidden by a preload), the size at which the workflow's
       screening takes a secant instead of the tangent at 0 (also where its full fit
       starts).
+    - `preload_joint`: for an effect on a joint's *absolute* deflection (a dead band, a
+      nonlinear spring), that joint: where the effect shows depends on its preload, and
+      for the compensated joint 2 the workflow scans the compensator's preload
+      (`jaxcal._screening.preload_scan`).
     """
 
     name: str
@@ -227,6 +231,7 @@ class Candidate:
     physical: Callable[[np.ndarray], bool] = lambda v: True
     decoy: bool = False
     screen_size: float | None = None
+    preload_joint: int | None = None
 
     @property
     def label(self) -> str:
@@ -270,6 +275,7 @@ def _backlash(j: int) -> Candidate:
         ),
         physical=lambda v: bool(v[0] > 0),
         screen_size=40.0,
+        preload_joint=j,
     )
 
 
@@ -284,6 +290,7 @@ def _nonlin(j: int) -> Candidate:
             f"joint {j} stiffness {'hardens' if v[0] > 0 else 'softens'} with deflection: "
             f"{_pm(100 * v[0], 100 * s[0], '%')} stiffness change at 1 mrad"
         ),
+        preload_joint=j,
     )
 
 

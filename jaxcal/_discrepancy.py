@@ -44,14 +44,15 @@ from ._discrepancy_report import (
     DECISIVE_BIC,
     CandidateResult,
     DiscoveryReport,
-    _press,
     _rms_mm,
     _separating,
     _structure,
     chi2_sf,
 )
+from ._heldout import heldout_residuals
 from ._io import Dataset
 from ._robot import Robot
+from ._screening import candidate_free, linear_screen, preload_scan, secant_columns
 from ._supermodel import MAX_STEPS, BatchFit, SuperModel
 
 __all__ = [
@@ -61,18 +62,14 @@ __all__ = [
     "discover_batch",
     "chi2_sf",
     "DECISIVE_BIC",
-    "_press",
 ]
+
+#: Calls of `max_steps` LM steps a fit may take (`SuperModel.fit`'s `rounds`): fits
+#: along the flat (Kc, Kc·s0) valley of a joint-2 dead band need 70–130 steps.
+ROUNDS = 2
 
 
 # -- the workflow --------------------------------------------------------------------------
-
-
-def _cand_free(sm: SuperModel, i: int) -> np.ndarray:
-    free = np.zeros(len(sm.names), bool)
-    free[: sm.n_nominal] = True
-    free[sm.slices[i]] = True
-    return free
 
 
 def discover_batch(
@@ -117,23 +114,20 @@ def discover_batch(
     say("fitting the nominal model")
     free0 = np.zeros(len(sm.names), bool)
     free0[: sm.n_nominal] = True
-    nom = sm.fit(sm.start, free0, deflections, sigma, max_steps=max_steps)
+    nom = sm.fit(sm.start, free0, deflections, sigma, max_steps=max_steps, rounds=ROUNDS)
     # Jacobian w.r.t. every parameter at the nominal optimum, for the score screening.
     nom_jac = sm.jacobian(nom.params, sigma)
 
-    # 2. screening: score (linearised) χ² drop of every candidate at the nominal optimum
-    r0 = (deflections - _model_from(nom, deflections)) / sigma[:, :, None]
-    _secant_columns(sm, cands, nom, nom_jac, deflections, sigma)
-    lin = np.zeros((S, len(cands)))
-    lin_delta = np.zeros((S, len(cands), len(sm.names)))
-    for s in range(S):
-        r = r0[s].reshape(-1)
-        for i in range(len(cands)):
-            cols = np.flatnonzero(_cand_free(sm, i))
-            delta, *_ = np.linalg.lstsq(nom_jac[s][:, cols], r, rcond=None)
-            rr = r - nom_jac[s][:, cols] @ delta
-            lin[s, i] = nom.chi2[s] - float(rr @ rr)
-            lin_delta[s, i, cols] = delta
+    # 2. screening: score (linearised) χ² drop of every candidate at the nominal optimum,
+    # and for joint-2 dead bands and nonlinearities the scan over the compensator preload
+    secant_columns(sm, cands, nom, nom_jac, deflections, sigma)
+    lin, lin_delta = linear_screen(sm, cands, nom, nom_jac, sigma)
+    scan, scan_starts = preload_scan(sm, cands, nom, deflections, sigma)
+    from_scan = scan > lin
+    lin = np.where(from_scan, scan, lin)
+    for (s, i), st in scan_starts.items():
+        if from_scan[s, i]:
+            lin_delta[s, i] = st - nom.params[s]
     k = np.array([c.n_params for c in cands])
     lin_dbic = lin - k[None] * lnN
     K = min(refine, len(cands))
@@ -144,29 +138,55 @@ def discover_batch(
     starts, frees, targets, owner = [], [], [], []
     for s in range(S):
         for i in top[s]:
-            # From the nominal optimum with the effect absent (at its screening size if it
-            # has one), not from the linearised step: see the module docstring.
-            st = nom.params[s].copy()
-            size = cands[i].screen_size
-            st[sm.slices[i]] = 0.0 if size is None else size
+            if from_scan[s, i]:
+                st = scan_starts[(s, i)]
+            else:
+                # From the nominal optimum with the effect absent (at its screening size
+                # if it has one), not from the linearised step: see the module docstring.
+                st = nom.params[s].copy()
+                size = cands[i].screen_size
+                st[sm.slices[i]] = 0.0 if size is None else size
             starts.append(st)
-            frees.append(_cand_free(sm, i))
+            frees.append(candidate_free(sm, i))
             targets.append(deflections[s])
             owner.append((s, i))
+    targets_a = np.asarray(targets)
+    sigmas_a = np.asarray([sigma[s] for s, _ in owner])
     fits = sm.fit(
         np.asarray(starts),
         np.asarray(frees),
-        np.asarray(targets),
-        np.asarray([sigma[s] for s, _ in owner]),
+        targets_a,
+        sigmas_a,
         max_steps=max_steps,
+        rounds=ROUNDS,
     )
     refined = {o: j for j, o in enumerate(owner)}
 
-    groups = sm.groups
+    # 4. held-out residuals of the nominal model and of each set's best candidate
+    say("held-out residuals (leave one configuration out)")
+    kw = dict(max_steps=max_steps, rounds=ROUNDS)
+    held_nom = heldout_residuals(sm, nom, list(range(S)), deflections, sigma, **kw)
+    best = _best_refined(cands, sm, nom, fits, owner, lnN)
+    held = heldout_residuals(sm, fits, list(best.values()), targets_a, sigmas_a, **kw)
+
     reports = []
     for s in range(S):
         reports.append(
-            _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, groups, sigma[s])
+            _report(
+                sm,
+                data,
+                cands,
+                s,
+                nom,
+                fits,
+                refined,
+                lin,
+                lin_delta,
+                lnN,
+                sigma[s],
+                held_nom[s],
+                held,
+            )
         )
     if separate:
         for rep in reports:
@@ -175,33 +195,28 @@ def discover_batch(
     return reports
 
 
-def _secant_columns(sm, cands, nom, jac, deflections, sigma) -> None:
-    """Replace, in the screening Jacobian `jac` (S, 3n, P), the column of every
-    one-parameter candidate with a `screen_size` by its secant from 0 to that size.
-
-    A dead band's derivative at zero width is `∓1` on each side and cancels between the
-    loaded and unloaded measurement of a preloaded joint, so the tangent at "absent"
-    misses an effect the secant sees."""
-    idx = [i for i, c in enumerate(cands) if c.screen_size is not None and c.n_params == 1]
-    if not idx:
-        return
-    S = nom.params.shape[0]
-    P1 = np.repeat(nom.params, len(idx), axis=0)
-    for k, i in enumerate(idx):
-        P1[k :: len(idx), sm.slices[i]] = cands[i].screen_size
-    dp1, _ = sm.predict(P1)
-    model0 = _model_from(nom, deflections)
-    for s in range(S):
-        for k, i in enumerate(idx):
-            d = (dp1[s * len(idx) + k] - model0[s]) / sigma[s][:, None]
-            jac[s][:, sm.slices[i].start] = d.reshape(-1) / cands[i].screen_size
+def _usable(fits: BatchFit, j: int) -> bool:
+    # A fit that ran out of LM steps still bounds its candidate's minimum χ² from above
+    # (conservative for ΔBIC); its model must be valid and its Jacobian of full rank.
+    return bool(fits.valid[j] and fits.well[j])
 
 
-def _model_from(fit: BatchFit, target: np.ndarray) -> np.ndarray:
-    return target - fit.residuals
+def _best_refined(cands, sm, nom, fits, owner, lnN) -> dict[int, int]:
+    """Per set, the fit of its best eligible (refined, usable, physical) candidate by
+    ΔBIC: the ranking `_report` makes."""
+    best: dict[int, tuple[float, int]] = {}
+    for j, (s, i) in enumerate(owner):
+        c = cands[i]
+        if not (_usable(fits, j) and c.physical(fits.params[j][sm.slices[i]])):
+            continue
+        dbic = float(nom.chi2[s] - fits.chi2[j]) - c.n_params * lnN
+        if s not in best or dbic > best[s][0]:
+            best[s] = (dbic, j)
+    return {s: j for s, (_, j) in best.items()}
 
 
-def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, groups, sigma):
+def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, held_nom, held):
+    groups = sm.groups
     N = 3 * len(data)
     p0 = sm.n_nominal
     chi2_0 = float(nom.chi2[s])
@@ -211,11 +226,11 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, groups,
         sl = sm.slices[i]
         if (s, i) in refined:
             j = refined[(s, i)]
-            chi2 = float(fits.chi2[j]) if fits.ok[j] else float("inf")
+            chi2 = float(fits.chi2[j]) if _usable(fits, j) else float("inf")
             vals = fits.params[j][sl]
             stds = np.sqrt(np.abs(np.diag(fits.cov[j])[sl]))
             rms = _rms_mm(fits.residuals[j])
-            ok = bool(fits.ok[j])
+            ok = _usable(fits, j)
         else:
             chi2 = chi2_0 - float(lin[s, i])
             vals = lin_delta[s][i][sl]
@@ -241,16 +256,10 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, groups,
     best = eligible[0] if eligible else results[0]
     ib = cands.index(best.candidate)
 
-    r_nom = (nom.residuals[s] / sigma[:, None]).reshape(-1)
-    cols0 = np.flatnonzero(nom.free[s])
-    held0 = _press(nom.jac[s][:, cols0], r_nom, groups).reshape(-1, 3) * sigma[:, None]
-    held_before = _rms_mm(held0)
+    held_before = _rms_mm(held_nom)
     if (s, ib) in refined and best.refined:
         j = refined[(s, ib)]
-        r_b = (fits.residuals[j] / sigma[:, None]).reshape(-1)
-        cols = np.flatnonzero(fits.free[j])
-        held1 = _press(fits.jac[j][:, cols], r_b, groups).reshape(-1, 3) * sigma[:, None]
-        held_best = _rms_mm(held1)
+        held_best = _rms_mm(held[j]) if j in held else float("inf")
         res_best = fits.residuals[j]
         chi2_b = float(fits.chi2[j])
         cov_b = fits.cov[j]

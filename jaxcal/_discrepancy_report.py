@@ -211,24 +211,6 @@ def _structure(res: np.ndarray, sigma: np.ndarray, data: Dataset, groups: np.nda
     return out
 
 
-def _press(J: np.ndarray, r: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """Leave-one-configuration-out residuals (σ-weighted, flattened like `r`) of a
-    linear(ised) least-squares fit with σ-weighted Jacobian `J` and residual `r`."""
-    Q, _ = np.linalg.qr(J)
-    out = np.empty_like(r)
-    rows = np.repeat(groups, 3)
-    for g in np.unique(groups):
-        idx = np.flatnonzero(rows == g)
-        Qg = Q[idx]
-        A = np.eye(len(idx)) - Qg @ Qg.T
-        try:
-            out[idx] = np.linalg.solve(A, r[idx])
-        except np.linalg.LinAlgError:
-            # This configuration alone determines a parameter: it cannot be predicted.
-            out[idx] = np.inf
-    return out
-
-
 def _rms_mm(res_m: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.asarray(res_m) ** 2)) * 1e3)
 

@@ -66,8 +66,12 @@ class BatchFit(eqx.Module):
     `params` (B, P) user units; `free` (B, P) bool; `chi2` (B,); `residuals` (B, n, 3) m
     measured − model; `jac` (B, 3n, P) σ-weighted Jacobian of the *model* at the optimum
     (free columns; every column for `SuperModel.jacobian`); `cov` (B, P, P) `(JᵀJ)⁻¹`
-    over the free parameters (zeros elsewhere, NaN if rank deficient); `ok` (B,) LM
-    succeeded, every equilibrium converged and the fit is well posed; `steps` (B,).
+    over the free parameters (zeros elsewhere, NaN if rank deficient); `steps` (B,).
+
+    Flags (B,): `converged` LM met its tolerances within the step budget; `valid` every
+    equilibrium at the result converged and the residuals are finite (χ² is a value of
+    the model); `well` the Jacobian has full rank (the covariance exists); `ok` all three.
+    A valid, well-posed fit that ran out of steps still bounds the minimum χ² from above.
     """
 
     params: np.ndarray
@@ -78,6 +82,9 @@ class BatchFit(eqx.Module):
     cov: np.ndarray
     ok: np.ndarray
     steps: np.ndarray
+    converged: np.ndarray
+    valid: np.ndarray
+    well: np.ndarray
 
 
 def _chunks(fn, B, *arrays):
@@ -187,8 +194,9 @@ class SuperModel:
         """One fit (or, with `fit` False, one evaluation) of u = (nominal parameters,
         the `SLOTS` parameters at indices `sel`), `mask` marking which move.
 
-        Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), ok, steps)`; `Jw` is the
-        σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the result."""
+        Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), solved, valid, steps)`;
+        `Jw` is the σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the
+        result."""
         nn = self.n_nominal
         sc = jnp.concatenate([scale[:nn], scale[sel]])
 
@@ -248,8 +256,8 @@ class SuperModel:
         # J is of the residual (target − model)/σ; the model's is its negative.
         Jw = -Jw / sc[None, :]
         res = r.reshape(-1, 3) * sigma[:, None]
-        ok = solved & jnp.all(ok) & jnp.all(jnp.isfinite(r))
-        return embed(u, mask), res, jnp.sum(r**2), Jw, ok, steps
+        valid = jnp.all(ok) & jnp.all(jnp.isfinite(r))
+        return embed(u, mask), res, jnp.sum(r**2), Jw, solved, valid, steps
 
     def _batched(self, robot, design, scale, P0, SEL, MASK, T, S, fit, max_steps):
         return jax.vmap(
@@ -292,7 +300,7 @@ class SuperModel:
             np.ones((B, self.n)),
             fit=False,
         )
-        return -out[1], out[4]
+        return -out[1], out[5]
 
     def jacobian(self, params, sigma) -> np.ndarray:
         """σ-weighted Jacobian of the model w.r.t. *every* parameter, (B, 3n, P), at
@@ -327,6 +335,7 @@ class SuperModel:
         sigma: np.ndarray,
         *,
         max_steps: int = MAX_STEPS,
+        rounds: int = 1,
     ) -> BatchFit:
         """Batched fits: optimistix Levenberg–Marquardt of the nominal parameters plus,
         per member, the (at most `SLOTS`) parameters marked in `free` beyond the nominal
@@ -334,7 +343,9 @@ class SuperModel:
         mask, so one compile serves the nominal fit and every candidate.
 
         `start` (B, P) or (P,) user units; `free` (B, P) or (P,) bool; `target`
-        (B, n, 3) m; `sigma` (B, n) or (n,) m.
+        (B, n, 3) m; `sigma` (B, n) or (n,) m. A member that runs out of its `max_steps`
+        is continued from where it stopped, up to `rounds` calls in all (the step budget
+        is static, so this adds steps only where needed and without a new compile).
         """
         target = np.asarray(target, float)
         B = target.shape[0]
@@ -354,9 +365,29 @@ class SuperModel:
         mask = np.zeros((B, nn + SLOTS))
         mask[:, :nn] = 1.0
         mask[:, nn:] = np.arange(SLOTS)[None, :] < extra[:, None]
-        p, res, chi2, Jw, ok, steps = self._call(
-            start, sel, mask, target, sigma, fit=True, max_steps=max_steps
-        )
+        out = [
+            np.array(x)
+            for x in self._call(start, sel, mask, target, sigma, fit=True, max_steps=max_steps)
+        ]
+        for _ in range(rounds - 1):
+            # Fits crawling along a flat valley (Kc, Kc·s0 of a dead band) need more.
+            again = np.flatnonzero(~out[4] & out[5])
+            if not again.size:
+                break
+            more = self._call(
+                out[0][again],
+                sel[again],
+                mask[again],
+                target[again],
+                sigma[again],
+                fit=True,
+                max_steps=max_steps,
+            )
+            steps_before = out[6][again]
+            for k, x in enumerate(more):
+                out[k][again] = x
+            out[6][again] += steps_before
+        p, res, chi2, Jw, solved, valid, steps = out
         jac = np.zeros((B, 3 * self.n, P))
         cov = np.zeros((B, P, P))
         well = np.zeros(B, bool)
@@ -367,7 +398,8 @@ class SuperModel:
             c, w = _covariance(jb)
             cov[b][np.ix_(cols, cols)] = c
             well[b] = w
-        return BatchFit(p, free, chi2, res, jac, cov, ok & well, steps)
+        ok = solved & valid & well
+        return BatchFit(p, free, chi2, res, jac, cov, ok, steps, solved, valid, well)
 
 
 #: Relative eigenvalue floor of the unit-diagonal normal matrix below which a fit is
