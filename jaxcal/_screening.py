@@ -34,6 +34,8 @@ __all__ = ["PRELOAD_FACTORS", "linear_screen", "preload_scan", "secant_columns"]
 #: point at ×0.8) in steps of 1 % (the window in which a 5 σ dead band shows is about
 #: 2.5 % wide).
 PRELOAD_FACTORS = np.linspace(0.6, 1.4, 81)
+#: The joint the compensator acts on (spec/robot.md).
+COMPENSATED_JOINT = 2
 
 
 def candidate_free(sm: SuperModel, i: int) -> np.ndarray:
@@ -109,13 +111,16 @@ def preload_scan(
     drop = np.full((S, len(cands)), -np.inf)
     starts: dict[tuple[int, int], np.ndarray] = {}
     idx = [
-        i for i, c in enumerate(cands) if c.preload_joint == 2 and c.n_params == 1 and not c.decoy
+        i
+        for i, c in enumerate(cands)
+        if c.preload_joint == COMPENSATED_JOINT and c.n_params == 1 and not c.decoy
     ]
     if not idx or not sm.robot.has_compensator:
         return drop, starts
     G = len(PRELOAD_FACTORS)
     base = np.tile(sm.start, (G, 1))
-    base[:, 7] = sm.start[7] * PRELOAD_FACTORS
+    ks0 = sm.names.index("Kc_s0_N")
+    base[:, ks0] = sm.start[ks0] * PRELOAD_FACTORS
     sizes = [cands[i].screen_size or cands[i].scale[0] for i in idx]
     P = [base]
     for i, size in zip(idx, sizes, strict=True):

@@ -180,6 +180,8 @@ def main():
             c: [rep.heldout_rms_after_mm for rep in r["reports"]] for c, r in res.items()
         },
         "delta_bic": {c: [rep.delta_bic for rep in r["reports"]] for c, r in res.items()},
+        # Per seed, the named effect's fitted parameters: {name: [value, std]}.
+        "fitted": {c: [rep.params for rep in r["reports"]] for c, r in res.items()},
         "truth": {
             c: None if r["truth"] is None else list(map(float, r["truth"])) for c, r in res.items()
         },
