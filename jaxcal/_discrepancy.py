@@ -340,6 +340,7 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, 
         residuals_before=nom.residuals[s],
         residuals_after=res_best,
         nominal_params=nominal if not chosen else named(sm.names, params_b, cov_b, slice(0, p0)),
+        nominal_converged=bool(nom.converged[s]),
     )
     rep._sigma_mm = float(np.mean(sigma) * 1e3)
     rep._best_params = params_b  # type: ignore[attr-defined]

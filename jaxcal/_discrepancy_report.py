@@ -93,6 +93,9 @@ class DiscoveryReport:
     residuals_before: np.ndarray | None = None
     residuals_after: np.ndarray | None = None
     nominal_params: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: Whether the nominal fit met its tolerances; if not its χ² is too high and ΔBIC
+    #: may be overstated (the summary says so).
+    nominal_converged: bool = True
 
     def to_json(self) -> dict:
         """The JSON object of `jaxcal discover --json`."""
@@ -134,6 +137,11 @@ class DiscoveryReport:
                 f"{self.chi2_red_before:.3f} → {self.chi2_red_after:.3f}, ΔBIC = "
                 f"{self.delta_bic:.1f}, held-out RMS {self.heldout_rms_before_mm:.4f} → "
                 f"{self.heldout_rms_after_mm:.4f} mm."
+            )
+        if not self.nominal_converged:
+            lines.append(
+                "Warning: the nominal fit stopped before meeting its tolerances; its χ² may "
+                "be too high and every ΔBIC overstated."
             )
         if self.ambiguous_with:
             lines.append(
