@@ -168,32 +168,25 @@ def discover_batch(
     )
     refined = {o: j for j, o in enumerate(owner)}
 
-    # 4. held-out residuals of the nominal model and of each set's best candidate
+    # 4. rank the candidates of each set; held-out residuals of the nominal model and of
+    # each set's best candidate
+    ranked = [
+        _rank(sm, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma[s]) for s in range(S)
+    ]
+    best_fits = [
+        refined[(s, cands.index(best.candidate))]
+        for s, (_, best) in enumerate(ranked)
+        if best.eligible
+    ]
     say("held-out residuals (leave one configuration out)")
     kw = dict(max_steps=max_steps, rounds=ROUNDS)
     held_nom = heldout_residuals(sm, nom, list(range(S)), deflections, sigma, **kw)
-    best = _best_refined(cands, sm, nom, fits, owner, lnN)
-    held = heldout_residuals(sm, fits, list(best.values()), targets_a, sigmas_a, **kw)
+    held = heldout_residuals(sm, fits, best_fits, targets_a, sigmas_a, **kw)
 
-    reports = []
-    for s in range(S):
-        reports.append(
-            _report(
-                sm,
-                data,
-                cands,
-                s,
-                nom,
-                fits,
-                refined,
-                lin,
-                lin_delta,
-                lnN,
-                sigma[s],
-                held_nom[s],
-                held,
-            )
-        )
+    reports = [
+        _report(sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held)
+        for s in range(S)
+    ]
     if separate:
         for rep in reports:
             if rep.ambiguous_with:
@@ -207,26 +200,11 @@ def _usable(fits: BatchFit, j: int) -> bool:
     return bool(fits.valid[j] and fits.well[j])
 
 
-def _best_refined(cands, sm, nom, fits, owner, lnN) -> dict[int, int]:
-    """Per set, the fit of its best eligible (refined, usable, physical) candidate by
-    ΔBIC: the ranking `_report` makes."""
-    best: dict[int, tuple[float, int]] = {}
-    for j, (s, i) in enumerate(owner):
-        c = cands[i]
-        if not (_usable(fits, j) and c.physical(fits.params[j][sm.slices[i]])):
-            continue
-        dbic = float(nom.chi2[s] - fits.chi2[j]) - c.n_params * lnN
-        if s not in best or dbic > best[s][0]:
-            best[s] = (dbic, j)
-    return {s: j for s, (_, j) in best.items()}
-
-
-def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, held_nom, held):
-    groups = sm.groups
-    N = 3 * len(data)
-    p0 = sm.n_nominal
+def _rank(sm, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma):
+    """Every candidate's result for set `s`, best ΔBIC first, and the best: the best
+    eligible (fully fitted, usable, physical) one, else the best screened one."""
+    N = 3 * sm.n
     chi2_0 = float(nom.chi2[s])
-    nu0 = N - p0
     results: list[CandidateResult] = []
     for i, c in enumerate(cands):
         sl = sm.slices[i]
@@ -258,8 +236,15 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, 
             )
         )
     results.sort(key=lambda r: -r.delta_bic)
-    eligible = [r for r in results if r.refined and r.physical and np.isfinite(r.chi2)]
-    best = eligible[0] if eligible else results[0]
+    eligible = [r for r in results if r.eligible]
+    return results, (eligible[0] if eligible else results[0])
+
+
+def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_nom, held):
+    N = 3 * len(data)
+    p0 = sm.n_nominal
+    chi2_0 = float(nom.chi2[s])
+    nu0 = N - p0
     ib = cands.index(best.candidate)
 
     held_before = _rms_mm(held_nom)
@@ -274,7 +259,7 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, 
         held_best, res_best, chi2_b = float("inf"), nom.residuals[s], chi2_0
         cov_b, params_b = nom.cov[s], nom.params[s]
     chosen = (
-        bool(eligible)
+        best.eligible
         and best.delta_bic >= DECISIVE_BIC
         and np.isfinite(held_best)
         and held_best < held_before
@@ -285,8 +270,7 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, 
             r.label
             for r in results
             if r is not best
-            and r.refined
-            and r.physical
+            and r.eligible
             and best.delta_bic - r.delta_bic < 10.0
             and r.delta_bic >= DECISIVE_BIC
         ]
@@ -335,8 +319,8 @@ def _report(sm, data, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma, 
         best=best.label,
         candidates=results,
         ambiguous_with=amb,
-        structure_before=_structure(nom.residuals[s], sigma, data, groups),
-        structure_after=_structure(res_best, sigma, data, groups),
+        structure_before=_structure(nom.residuals[s], sigma, data, sm.groups),
+        structure_after=_structure(res_best, sigma, data, sm.groups),
         residuals_before=nom.residuals[s],
         residuals_after=res_best,
         nominal_params=nominal if not chosen else named(sm.names, params_b, cov_b, slice(0, p0)),

@@ -54,6 +54,11 @@ class CandidateResult:
     def label(self) -> str:
         return self.candidate.label
 
+    @property
+    def eligible(self) -> bool:
+        """Whether it can be chosen: fully fitted, with a usable fit and physical values."""
+        return self.refined and self.physical and bool(np.isfinite(self.chi2))
+
 
 @dataclass
 class DiscoveryReport:

@@ -80,11 +80,14 @@ class BatchFit(eqx.Module):
     residuals: np.ndarray
     jac: np.ndarray
     cov: np.ndarray
-    ok: np.ndarray
     steps: np.ndarray
     converged: np.ndarray
     valid: np.ndarray
     well: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.converged & self.valid & self.well
 
 
 def _chunks(fn, B, *arrays):
@@ -398,8 +401,7 @@ class SuperModel:
             c, w = _covariance(jb)
             cov[b][np.ix_(cols, cols)] = c
             well[b] = w
-        ok = solved & valid & well
-        return BatchFit(p, free, chi2, res, jac, cov, ok, steps, solved, valid, well)
+        return BatchFit(p, free, chi2, res, jac, cov, steps, solved, valid, well)
 
 
 #: Relative eigenvalue floor of the unit-diagonal normal matrix below which a fit is

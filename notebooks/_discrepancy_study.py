@@ -108,6 +108,16 @@ def hidden_data(robot, data, cases, seeds, *, max_sigma=MAX_SIGMA, perturbed=Fal
     return nominal, out
 
 
+def study_design(data):
+    """The design of `data` (configurations and loads) with the study's σ and no
+    deflections."""
+    import jax.numpy as jnp
+
+    return type(data)(
+        data.q, data.force, data.moment, None, jnp.full_like(data.sigma, SIGMA), data.ids, ""
+    )
+
+
 #: Seeds per case in tests/test_discrepancy.py (a prefix of the study's 10).
 TEST_SEEDS = range(3)
 
@@ -115,13 +125,9 @@ TEST_SEEDS = range(3)
 def run_study(robot, data, cases=CASES, seeds=range(10), progress=None, perturbed=False):
     """Per case, the list of (effect label or "none") named for each seed and the
     reports. Cases that share a nominal robot run through one `discover_batch` call."""
-    import jax.numpy as jnp
-
     from jaxcal._discrepancy import discover_batch
 
-    data = type(data)(
-        data.q, data.force, data.moment, None, jnp.full_like(data.sigma, SIGMA), data.ids, ""
-    )
+    data = study_design(data)
     groups = [[c for c in cases if c != "compensator"], [c for c in cases if c == "compensator"]]
     out = {}
     for group in groups:

@@ -280,15 +280,7 @@ def dead_band(robot, example, study):
     from jaxcal._screening import candidate_free
     from jaxcal._supermodel import SuperModel
 
-    ex = type(example)(
-        example.q,
-        example.force,
-        example.moment,
-        None,
-        jnp.full_like(example.sigma, STUDY.SIGMA),
-        example.ids,
-        "",
-    )
+    ex = STUDY.study_design(example)
     nominal, hidden = STUDY.hidden_data(robot, ex, ["backlash[2]"], range(1))
     cands = default_candidates(nominal)
     sm = SuperModel(nominal, cands, ex)
