@@ -10,6 +10,11 @@ Identification and µm-level simulation need float64:
 global configuration by itself).
 """
 
+from ._cache import (
+    cache_dir as cache_dir,
+    disable_compilation_cache as disable_compilation_cache,
+    enable_compilation_cache as enable_compilation_cache,
+)
 from ._candidates import (
     Backlash as Backlash,
     Candidate as Candidate,

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 __all__ = ["main", "add_robot_argument", "format_table", "print_json"]
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
-_COMMANDS = ("demo", "simulate", "identify", "montecarlo", "design", "discover")
+_COMMANDS = ("demo", "simulate", "identify", "montecarlo", "design", "discover", "cache")
 
 
 def add_robot_argument(p: argparse.ArgumentParser) -> None:
@@ -109,6 +109,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in _COMMANDS:
         importlib.import_module(f"jaxcal._cli_{name}").register(sub)
+    for name, p in sub.choices.items():
+        if name != "cache":
+            p.add_argument(
+                "--no-cache",
+                action="store_true",
+                help="do not use the persistent compilation cache (also JAXCAL_CACHE_DIR=off)",
+            )
     return parser
 
 
@@ -122,6 +129,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     jax.config.update("jax_enable_x64", True)
     from ._io import DataError
 
+    if getattr(args, "uses_cache", True) and not getattr(args, "no_cache", False):
+        _enable_cache()
+
     try:
         return int(args.func(args) or 0)
     except (DataError, ValueError) as e:
@@ -134,6 +144,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _enable_cache() -> None:
+    """Turn on the persistent compilation cache; a problem with it is a warning only."""
+    import warnings
+
+    from ._cache import enable_compilation_cache
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enable_compilation_cache()
+    for w in caught:
+        print(f"jaxcal: warning: {w.message}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,9 @@ cells = [
         "%matplotlib inline\n"
         "import jax\n\n"
         "# µm-level deflections need float64; the library never flips this itself.\n"
-        'jax.config.update("jax_enable_x64", True)\n\n'
+        'jax.config.update("jax_enable_x64", True)\n'
+        "import jaxcal\n"
+        "jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)\n\n"
         "import equinox as eqx\n"
         "import jax.numpy as jnp\n"
         "import matplotlib.pyplot as plt\n"

@@ -16,6 +16,8 @@ cells = [
     (
         "code",
         'import jax\njax.config.update("jax_enable_x64", True)\n'
+        "import jaxcal\n"
+        "jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)\n"
         "%matplotlib inline\nimport json\nimport numpy as np\nimport matplotlib.pyplot as plt\n"
         "import jaxcal\nfrom jaxcal._identify import identify\nfrom jaxcal._cli import format_table",
     ),

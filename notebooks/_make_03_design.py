@@ -34,6 +34,8 @@ cells = [
     code(
         "import jax\n"
         'jax.config.update("jax_enable_x64", True)\n'
+        "import jaxcal\n"
+        "jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)\n"
         "import json, time\n"
         "import numpy as np, jax.numpy as jnp\n"
         "import matplotlib\n"

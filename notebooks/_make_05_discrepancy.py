@@ -24,6 +24,8 @@ error — or say *none*; (4) show the gap shrink.""",
         "code",
         """import jax
 jax.config.update("jax_enable_x64", True)
+import jaxcal
+jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)
 %matplotlib inline
 import json, time
 import numpy as np

@@ -1,12 +1,24 @@
 """Test configuration: identification and µm-level checks need float64, enabled here
 explicitly (the library never flips global JAX config on import)."""
 
+import os
+import tempfile
 from pathlib import Path
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+
+
+def pytest_configure(config):
+    # The command line (run in-process by the tests) and the notebooks turn on the
+    # persistent compilation cache. Point it at a directory of this run, shared by the
+    # xdist workers and notebook kernels (they inherit the environment), never at the
+    # user's own cache.
+    if not hasattr(config, "workerinput"):
+        os.environ["JAXCAL_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxcal-test-cache-")
+
 
 DATA = Path(__file__).parent / "data"
 

@@ -1,0 +1,105 @@
+"""The persistent compilation cache: where it lives, how it is turned off, that a bad
+directory or a corrupt entry is a warning and never a failure, and `jaxcal cache`."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import jaxcal
+from jaxcal._cli import main
+from jaxcal.internal import cache_info, clear_cache
+
+
+def test_cache_dir_resolution(monkeypatch, tmp_path):
+    monkeypatch.setenv("JAXCAL_CACHE_DIR", str(tmp_path / "c"))
+    assert jaxcal.cache_dir() == tmp_path / "c"
+    monkeypatch.setenv("JAXCAL_CACHE_DIR", "off")
+    assert jaxcal.cache_dir() is None
+    monkeypatch.setenv("JAXCAL_CACHE_DIR", "OFF")
+    assert jaxcal.cache_dir() is None
+    monkeypatch.delenv("JAXCAL_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert jaxcal.cache_dir() == tmp_path / "xdg" / "jaxcal"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert jaxcal.cache_dir() == tmp_path / "home" / ".cache" / "jaxcal"
+
+
+def test_unusable_directory_is_a_warning(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    with pytest.warns(UserWarning, match="compilation cache disabled"):
+        assert jaxcal.enable_compilation_cache(blocker / "cache") is None
+
+
+def test_off_is_none(monkeypatch):
+    monkeypatch.setenv("JAXCAL_CACHE_DIR", "off")
+    assert jaxcal.enable_compilation_cache() is None
+    assert main(["cache", "info", "--json"]) == 0
+
+
+_PROGRAM = textwrap.dedent(
+    """
+    import warnings, jax, jax.numpy as jnp, jaxcal
+    warnings.simplefilter("always")
+    print("dir", jaxcal.enable_compilation_cache())
+    f = jax.jit(lambda x: jnp.sin(x) @ jnp.cos(x).T + 1.0)
+    print("value", float(f(jnp.ones((3, 3))).sum()))
+    """
+)
+
+
+def _run(env):
+    out = subprocess.run(
+        [sys.executable, "-c", _PROGRAM], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    return out
+
+
+def test_entries_written_and_corrupt_entries_recompiled(tmp_path):
+    env = {**os.environ, "JAXCAL_CACHE_DIR": str(tmp_path / "cache")}
+    first = _run(env)
+    info = cache_info(tmp_path / "cache")
+    assert info["entries"] >= 1 and info["bytes"] > 0
+    for f in Path(tmp_path / "cache").glob("*-cache"):
+        f.write_bytes(b"garbage")
+    second = _run(env)
+    value = lambda o: [ln for ln in o.stdout.splitlines() if ln.startswith("value")]
+    assert value(second) == value(first)
+    assert "Error reading persistent compilation cache entry" in second.stderr
+
+
+def test_cli_info_and_clear(monkeypatch, tmp_path, capsys):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / "jit_f-0123-cache").write_bytes(b"x" * 100)
+    (cache / "jit_f-0123-atime").write_bytes(b"y" * 8)
+    monkeypatch.setenv("JAXCAL_CACHE_DIR", str(cache))
+    assert main(["cache", "info", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["path"] == str(cache) and d["entries"] == 1 and d["bytes"] == 108
+    assert main(["cache", "clear"]) == 0
+    assert "freed" in capsys.readouterr().out
+    assert not cache.exists()
+
+
+def test_clear_refuses_foreign_files(tmp_path):
+    (tmp_path / "thesis.tex").write_text("precious")
+    with pytest.raises(ValueError, match="not JAX cache entries"):
+        clear_cache(tmp_path)
+    assert (tmp_path / "thesis.tex").exists()
+
+
+def test_no_cache_flag_parses(data_dir, capsys, tmp_path):
+    # --no-cache is accepted by every command, after the command's own arguments.
+    out = tmp_path / "o.csv"
+    rc = main(["simulate", str(data_dir / "example_calibration.csv"), "-o", str(out), "--no-cache"])
+    assert rc == 0 and out.exists()
