@@ -15,6 +15,12 @@ from ._cache import (
     disable_compilation_cache as disable_compilation_cache,
     enable_compilation_cache as enable_compilation_cache,
 )
+from ._calibration import (
+    Calibration as Calibration,
+    calibrated_robot as calibrated_robot,
+    read_calibration as read_calibration,
+    save_robot as save_robot,
+)
 from ._candidates import (
     Backlash as Backlash,
     Candidate as Candidate,
@@ -138,11 +144,17 @@ from ._simulate import (
     model_deflections as model_deflections,
     simulate as simulate,
 )
+from ._solution import RESULTS as RESULTS
 from ._supermodel import SuperModel as SuperModel
 from ._two_step import (
     fit_two_step as fit_two_step,
     solve_two_step as solve_two_step,
     two_step_system as two_step_system,
+)
+from .compensation import (
+    Compensation as Compensation,
+    compensate as compensate,
+    read_path as read_path,
 )
 
 __version__ = "0.1.0"

@@ -14,11 +14,21 @@ import math
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-__all__ = ["main", "add_robot_argument", "format_table", "print_json"]
+__all__ = ["main", "add_robot_argument", "check_output_path", "format_table", "print_json"]
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
-_COMMANDS = ("demo", "simulate", "identify", "montecarlo", "design", "discover", "cache")
+_COMMANDS = (
+    "demo",
+    "simulate",
+    "identify",
+    "montecarlo",
+    "design",
+    "discover",
+    "compensate",
+    "cache",
+)
 
 
 def add_robot_argument(p: argparse.ArgumentParser) -> None:
@@ -46,6 +56,22 @@ def add_fix_argument(p: argparse.ArgumentParser, why: str) -> None:
 def fix_names(values: Sequence[str]) -> list[str]:
     """The parameter names given with `--fix` (flattening comma lists)."""
     return [s.strip() for v in values for s in v.split(",") if s.strip()]
+
+
+def check_output_path(path: str | None, option: str) -> None:
+    """Refuse, before any work starts, an output path that cannot be written: a
+    directory, or a file in a directory that does not exist (`ValueError` naming the
+    option)."""
+    if path is None or path == "-":
+        return
+    p = Path(path)
+    if p.is_dir() or str(path).endswith(("/", os.sep)):
+        raise ValueError(f"{option} {path}: is a directory; give a file name")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"{option} {path}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{option} {path}: directory {parent} is not writable")
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

@@ -6,7 +6,13 @@ import argparse
 import sys
 import warnings
 
-from ._cli import add_fix_argument, add_robot_argument, fix_names, print_json
+from ._cli import (
+    add_fix_argument,
+    add_robot_argument,
+    check_output_path,
+    fix_names,
+    print_json,
+)
 from ._identify import METHODS
 
 
@@ -43,6 +49,12 @@ def register(sub) -> None:
         metavar="T",
         help="report rows whose largest |residual|/sigma exceeds T (default 3)",
     )
+    p.add_argument(
+        "--save-robot",
+        metavar="CALIBRATED.json",
+        help="write the robot file with the identified parameters and a 'calibration' block "
+        "(method, date, data file and hash, std, covariance, chi2); load it with --robot",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -54,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
+    check_output_path(args.save_robot, "--save-robot")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)
@@ -62,8 +75,23 @@ def run(args: argparse.Namespace) -> int:
         res = identify(robot, data, args.method, fix=tuple(fix_names(args.fix)), robust=args.robust)
     for w in caught:
         print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
+    saved = None
+    if args.save_robot:
+        if not bool(res.converged):
+            print(
+                f"jaxcal identify: error: the fit did not converge; {args.save_robot} not written",
+                file=sys.stderr,
+            )
+            return 1
+        from ._calibration import save_robot
+
+        save_robot(args.save_robot, robot, res, args.data)
+        saved = args.save_robot
     if args.json:
-        print_json(res.to_dict(args.outlier_threshold, data.ids))
+        d = res.to_dict(args.outlier_threshold, data.ids)
+        if saved:
+            d["saved_robot"] = saved
+        print_json(d)
         return 0
     print(res.table())
     rows = res.outliers(args.outlier_threshold)
@@ -72,4 +100,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"outliers (|residual|/sigma > {args.outlier_threshold:g}): rows {', '.join(label)}")
     else:
         print(f"no outliers (|residual|/sigma > {args.outlier_threshold:g})")
+    if saved:
+        print(f"calibrated robot written to {saved} (use it with --robot {saved})")
     return 0

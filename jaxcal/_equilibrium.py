@@ -22,7 +22,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._compensator import _potential as _compensator_potential
-from ._dense import SmallLU, is_positive_definite
+from ._dense import SmallLU, is_positive_definite, lu_factor, lu_solve
 from ._effects import collect_effects, observe_effects
 from ._kinematics import _vee_rotation_derivative, forward, mass_positions
 from ._robot import G, Robot
@@ -112,7 +112,7 @@ def _scale(robot: Robot, q) -> Float[Array, " ndof"]:
     return jnp.concatenate([robot.compliance, fx.scale]).astype(q.dtype)
 
 
-def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
+def _solve(robot, q, force, moment, *, check_stability: bool, x0=None) -> Equilibrium:
     q = jnp.asarray(q)
     dtype = jnp.result_type(q, robot.compliance)
     q = q.astype(dtype)
@@ -126,7 +126,9 @@ def _solve(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
     # Linear algebra in plain jnp (SmallLU), not LAPACK: this solve runs vmapped, and
     # batched LAPACK kernels can deadlock XLA's CPU thread pool (see `_dense`).
     solver = optx.Newton(rtol=rtol, atol=atol, linear_solver=SmallLU(), cauchy_termination=True)
-    x0 = jnp.zeros(scale.shape, dtype)
+    # A warm start (e.g. the equilibrium at nearby angles) saves Newton steps; the
+    # implicit adjoint makes the derivatives independent of it.
+    x0 = jnp.zeros(scale.shape, dtype) if x0 is None else jax.lax.stop_gradient(x0).astype(dtype)
     sol = optx.root_find(
         _residual,
         solver,
@@ -231,3 +233,66 @@ def deflection(
     """
     dp, ok = solve_deflection(robot, q, force, moment)
     return eqx.error_if(dp, ~ok, "static equilibrium did not converge or is not stable")
+
+
+def stop_gradients(tree):
+    """`tree` with `jax.lax.stop_gradient` on every array leaf."""
+    return jax.tree_util.tree_map(
+        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a, tree
+    )
+
+
+def tool_pose(robot: Robot, q: Float[Array, 6], x: Float[Array, " ndof"]):
+    """Tool point (m) and tool-frame rotation (base frame) at deflections `x`."""
+    return _tool_pose(robot, q, x)
+
+
+@jax.jit
+def batch_roots(
+    robot: Robot,
+    q: Float[Array, "n 6"],
+    force: Float[Array, "n 3"],
+    moment: Float[Array, "n 3"] | None,
+    x0: Float[Array, "n ndof"] | None = None,
+) -> tuple[Float[Array, "n ndof"], Bool[Array, " n"]]:
+    """Equilibrium roots `x` and convergence flags of `n` configurations (no
+    derivatives: differentiate with `implicit_step`); `x0` warm-starts Newton."""
+    # A jitted batch of equilibrium roots (no derivatives): every trace of a model that
+    # calls it with the same shapes reuses one cached jaxpr, instead of re-tracing the
+    # Newton loop under each transformation (the LM residual and its JVP rule each
+    # evaluate the model). Tracing the loop is most of a fit's time once compiled.
+    solve = lambda a, b, c, x: _solve(robot, a, b, c, check_stability=False, x0=x)
+    eq = jax.vmap(solve, in_axes=(0, 0, None if moment is None else 0, None if x0 is None else 0))(
+        q, force, moment, x0
+    )
+    return eq.x, eq.converged
+
+
+def implicit_step(robot: Robot, q, force, moment, x, converged, *, symmetric: bool = True):
+    """The root `x` of eq. (17) as a differentiable function: `x − H⁻¹ g(x)`.
+
+    At a root (from `batch_roots` or `_solve` on stop-gradient inputs) the value is `x`
+    and the first derivative with respect to the robot's parameters, `q`, the force and
+    the moment is the implicit-function one, `−H⁻¹ ∂g`. Unlike the optimistix adjoint
+    its linear solve never raises, so a failed equilibrium gives `ok = False`, not an
+    exception (essential under `vmap`). `symmetric` symmetrises `H` (exact for a
+    potential force; a tool moment makes `H` non-symmetric: pass `False`).
+    """
+    r0 = stop_gradients(robot)
+    x = jnp.where(jnp.isfinite(x), x, 0.0)
+    ones = jnp.ones_like(x)
+    H = jax.jacfwd(lambda y: _residual(y, (r0, q, force, moment, ones)))(x)
+    g = _residual(x, (robot, q, force, moment, ones))
+    if symmetric:
+        H = 0.5 * (H + H.T)
+    # lineax's JVP rule always raises on a non-finite solve, so a failed equilibrium
+    # gets a harmless identity Hessian (the row is flagged and replaced below).
+    good = converged & jnp.all(jnp.isfinite(H)) & jnp.all(jnp.isfinite(x))
+    H = jnp.where(good, H, jnp.eye(H.shape[0], dtype=H.dtype))
+    g = jnp.where(good, g, 0.0)
+    # An LU solve of this small system in plain jnp: no lineax JVP error check (a host
+    # callback) and no batched LAPACK kernel, which can deadlock XLA's CPU pool when
+    # vmapped over Monte-Carlo trials (see `_dense`).
+    dx = lu_solve(*lu_factor(H), g)
+    ok = good & jnp.all(jnp.isfinite(dx))
+    return x - jnp.where(jnp.isfinite(dx), dx, 0.0), ok

@@ -25,8 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._compensator import compensator_stiffness
-from ._dense import lu_factor, lu_solve
-from ._equilibrium import _residual, _solve, _tool_pose
+from ._equilibrium import _solve, _tool_pose, batch_roots, implicit_step, stop_gradients
 from ._ident_result import IdentificationResult, free_mask, make_result, resolve_name
 from ._io import Dataset
 from ._lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
@@ -149,12 +148,6 @@ def _has_moments(data: Dataset) -> bool:
         return True
 
 
-def _stop(tree):
-    return jax.tree_util.tree_map(
-        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a, tree
-    )
-
-
 def _equilibrium_x(robot: Robot, q, force, moment):
     """Equilibrium deflections θ* with derivatives w.r.t. the robot's parameters from
     one Newton step on the stop-gradient root, `x* − H⁻¹ g(x*, p)`: the value is the
@@ -162,44 +155,8 @@ def _equilibrium_x(robot: Robot, q, force, moment):
     optimistix adjoint, its linear solve never raises, so a trial point of the
     optimiser where the equilibrium fails gives a flag, not an exception (essential
     under `vmap`)."""
-    eq = _solve(_stop(robot), q, force, moment, check_stability=False)
-    return _implicit_step(robot, q, force, moment, eq.x, eq.converged)
-
-
-@jax.jit
-def _roots(robot: Robot, q, force, moment):
-    # A jitted batch of equilibrium roots (no derivatives): every trace of a model that
-    # calls it with the same shapes reuses one cached jaxpr, instead of re-tracing the
-    # Newton loop under each transformation (the LM residual and its JVP rule each
-    # evaluate the model). Tracing the loop is most of a fit's time once compiled.
-    if moment is None:
-        eq = jax.vmap(lambda a, b: _solve(robot, a, b, None, check_stability=False))(q, force)
-    else:
-        eq = jax.vmap(lambda a, b, c: _solve(robot, a, b, c, check_stability=False))(
-            q, force, moment
-        )
-    return eq.x, eq.converged
-
-
-def _implicit_step(robot: Robot, q, force, moment, x, converged):
-    """`x − H⁻¹ g(x, p)` at a root `x` (see `_equilibrium_x`), and its ok flag."""
-    r0 = _stop(robot)
-    x = jnp.where(jnp.isfinite(x), x, 0.0)
-    ones = jnp.ones_like(x)
-    H = jax.jacfwd(lambda y: _residual(y, (r0, q, force, moment, ones)))(x)
-    g = _residual(x, (robot, q, force, moment, ones))
-    H = 0.5 * (H + H.T)
-    # lineax's JVP rule always raises on a non-finite solve, so a failed equilibrium
-    # gets a harmless identity Hessian (the row is flagged and replaced below).
-    good = converged & jnp.all(jnp.isfinite(H)) & jnp.all(jnp.isfinite(x))
-    H = jnp.where(good, H, jnp.eye(H.shape[0], dtype=H.dtype))
-    g = jnp.where(good, g, 0.0)
-    # An LU solve of this small system in plain jnp: no lineax JVP error check (a host
-    # callback) and no batched LAPACK kernel, which can deadlock XLA's CPU pool when
-    # vmapped over Monte-Carlo trials (see `_dense`).
-    dx = lu_solve(*lu_factor(H), g)
-    ok = good & jnp.all(jnp.isfinite(dx))
-    return x - jnp.where(jnp.isfinite(dx), dx, 0.0), ok
+    eq = _solve(stop_gradients(robot), q, force, moment, check_stability=False)
+    return implicit_step(robot, q, force, moment, eq.x, eq.converged)
 
 
 #: Model value put in place of a failed equilibrium, m: far outside any real deflection,
@@ -227,10 +184,10 @@ def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=Non
 
     def predict(p):
         r = set_parameters(robot, p)
-        xs, conv = _roots(_stop(r), q_all, f_all, m_all if use_m else None)
+        xs, conv = batch_roots(stop_gradients(r), q_all, f_all, m_all if use_m else None)
 
         def tool(q, f, m, x, c):
-            x, ok = _implicit_step(r, q, f, m if use_m else None, x, c)
+            x, ok = implicit_step(r, q, f, m if use_m else None, x, c)
             return _tool_pose(r, q, x)[0], ok
 
         pt, oks = jax.vmap(tool)(q_all, f_all, m_all, xs, conv)

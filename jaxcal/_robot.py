@@ -19,7 +19,15 @@ from jaxtyping import Array, Float
 
 from ._effects import AbstractEffect
 
-__all__ = ["Robot", "Experiment", "load_robot", "robot_from_dict", "robot_to_dict", "PRESETS"]
+__all__ = [
+    "Robot",
+    "Experiment",
+    "load_robot",
+    "load_robot_dict",
+    "robot_from_dict",
+    "robot_to_dict",
+    "PRESETS",
+]
 
 #: Names of the built-in robot presets (files shipped in `jaxcal/robots/`).
 PRESETS: tuple[str, ...] = ("fanuc_m900ib700",)
@@ -295,9 +303,38 @@ def robot_to_dict(robot: Robot) -> dict:
     return d
 
 
+def load_robot_dict(robot: str | Path) -> tuple[dict, str]:
+    """The parsed JSON of a robot file or built-in preset, and a name for messages.
+
+    Raises `ValueError` (naming the file) if it is neither a preset nor a readable JSON
+    file."""
+    s = str(robot)
+    if s in PRESETS:
+        text = resources.files("jaxcal.robots").joinpath(f"{s}.json").read_text()
+        return json.loads(text), f"preset {s}"
+    path = Path(s)
+    if not path.exists():
+        raise ValueError(
+            f"robot {s!r} is neither a built-in preset ({', '.join(PRESETS)}) nor an existing file"
+        )
+    if path.is_dir():
+        raise ValueError(f"robot {s!r} is a directory, not a robot JSON file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a UTF-8 text file (a robot file is JSON)") from None
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read: {e.strerror}") from None
+    try:
+        return json.loads(text), str(path)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON: {e}") from None
+
+
 def load_robot(robot: str | Path | Robot = "fanuc_m900ib700") -> Robot:
-    """Load a robot: a built-in preset name (see `PRESETS`), a path to a robot JSON file,
-    or a `Robot` (returned unchanged).
+    """Load a robot: a built-in preset name (see `PRESETS`), a path to a robot JSON file
+    (a calibrated one included: see `jaxcal.read_calibration`), or a `Robot` (returned
+    unchanged).
 
     ```python
     robot = jaxcal.load_robot()                      # the FANUC M-900iB/700 preset
@@ -306,17 +343,5 @@ def load_robot(robot: str | Path | Robot = "fanuc_m900ib700") -> Robot:
     """
     if isinstance(robot, Robot):
         return robot
-    s = str(robot)
-    if s in PRESETS:
-        text = resources.files("jaxcal.robots").joinpath(f"{s}.json").read_text()
-        return robot_from_dict(json.loads(text), source=f"preset {s}")
-    path = Path(s)
-    if not path.exists():
-        raise ValueError(
-            f"robot {s!r} is neither a built-in preset ({', '.join(PRESETS)}) nor an existing file"
-        )
-    try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not valid JSON: {e}") from None
-    return robot_from_dict(d, source=str(path))
+    d, source = load_robot_dict(robot)
+    return robot_from_dict(d, source=source)

@@ -1,0 +1,210 @@
+"""Compensation of a whole path: input checks on the host, one jitted vmapped program
+over the rows, refusals named by row, and the commands file.
+
+A path is a data-format CSV without deflection columns: per row the programmed angles
+`q1_deg … q6_deg` and the process wrench `fx_N … mz_Nm` at the tool point (base frame).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._calibration import Calibration
+from .._io import F_COLS, M_COLS, Q_COLS, Dataset, read_dataset
+from .._robot import Robot
+from .._solution import RESULTS, messages
+from ._solve import RowCompensation, compensate_row
+
+__all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
+
+#: Columns a commands file adds to the path's own.
+COMMAND_COLUMNS = (
+    *(f"qc{i}_deg" for i in range(1, 7)),
+    "dx_mm",
+    "dy_mm",
+    "dz_mm",
+    "res_mm",
+    "res_rot_urad",
+    "cond",
+)
+
+
+class Compensation(eqx.Module):
+    """A compensated path: the programmed path, its per-row `RowCompensation` (leading
+    axis: the rows) and the settings. `ok` marks the rows that can be sent to the
+    controller; `refused()` names the others."""
+
+    path: Dataset
+    rows: RowCompensation
+    max_cond: float = eqx.field(static=True)
+    limits_deg: tuple[tuple[float, float], ...] = eqx.field(static=True, default=())
+
+    @property
+    def ok(self) -> np.ndarray:
+        return np.atleast_1d(np.asarray(self.rows.result == RESULTS.successful))
+
+    def refused(self) -> list[tuple[int, str]]:
+        """`(row, reason)` of every refused row, rows 1-based as in the file."""
+        msgs = messages(self.rows.result)
+        out = []
+        for i, m in enumerate(msgs):
+            if m:
+                extra = ""
+                if "condition" in m:
+                    extra = f" ({float(self.rows.cond[i]):.3g} > {self.max_cond:g})"
+                elif "joint limits" in m:
+                    extra = f" ({self._limit_detail(i)})"
+                out.append((i + 1, m + extra))
+        return out
+
+    def _limit_detail(self, i: int) -> str:
+        qc = np.rad2deg(np.asarray(self.rows.qc[i]))
+        out = [
+            f"qc{j + 1} = {v:.4f} deg outside [{lo:g}, {hi:g}]"
+            for j, (v, (lo, hi)) in enumerate(zip(qc, self.limits_deg, strict=True))
+            if not lo - 1e-9 <= v <= hi + 1e-9
+        ]
+        return "; ".join(out)
+
+    def summary(self) -> dict:
+        """Figures of the path (mm, µm, µrad), over the compensated rows."""
+        ok = self.ok
+        d = np.linalg.norm(np.asarray(self.rows.deflection), axis=1)[ok] * 1e3
+        r = np.linalg.norm(np.asarray(self.rows.residual), axis=1)[ok] * 1e6
+        rr = np.linalg.norm(np.asarray(self.rows.residual_rotation), axis=1)[ok] * 1e6
+        s = np.asarray(self.rows.res_std)[ok] * 1e3
+        nan = float("nan")
+        return {
+            "rows": int(ok.size),
+            "compensated": int(ok.sum()),
+            "refused": [{"row": r_, "reason": m} for r_, m in self.refused()],
+            "max_deflection_mm": float(d.max()) if d.size else nan,
+            "rms_deflection_mm": float(np.sqrt(np.mean(d**2))) if d.size else nan,
+            "max_residual_um": float(r.max()) if r.size else nan,
+            "max_residual_rotation_urad": float(rr.max()) if rr.size else nan,
+            "max_res_std_mm": float(s.max()) if s.size and np.all(np.isfinite(s)) else None,
+        }
+
+
+def read_path(path: str | Path, robot: Robot) -> Dataset:
+    """Read a path CSV (programmed angles and process wrench; deflection columns, if
+    any, are ignored). Bad cells, missing columns and angles beyond the joint limits are
+    named by file, row and column (`DataError`)."""
+    return read_dataset(path, robot, require_deflection=False, ignore_deflection=True)
+
+
+@eqx.filter_jit
+def _batch(robot, q, force, moment, covariance, max_cond, length_scale, tol):
+    one = lambda a, b, c: compensate_row(
+        robot, a, b, c, covariance, max_cond=max_cond, length_scale=length_scale, tol=tol
+    )
+    if moment is None:
+        return jax.vmap(lambda a, b: one(a, b, None))(q, force)
+    return jax.vmap(one)(q, force, moment)
+
+
+def compensate(
+    robot: Robot,
+    path: Dataset,
+    calibration: Calibration | Float[Array, "P P"] | None = None,
+    *,
+    max_cond: float = 1e4,
+    length_scale: float = 1.0,
+    tol: float = 1e-8,
+) -> Compensation:
+    """Compensated joint angles for every row of `path` (vectorised over the rows).
+
+    **Arguments**
+
+    - `robot`: the (calibrated) robot model.
+    - `path`: programmed angles and process wrench per row (`read_path`).
+    - `calibration`: a `Calibration` (from `jaxcal.read_calibration`) or a covariance of
+      all physical parameters (user units): gives each row's `res_std`.
+    - `max_cond`, `length_scale`, `tol`: see `compensate_row`.
+
+    Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
+    compensated are not raised but refused (`Compensation.refused()`).
+    """
+    if jnp.zeros(()).dtype != jnp.float64:
+        raise ValueError(
+            "compensation needs float64: call jax.config.update('jax_enable_x64', True) first"
+        )
+    if not (max_cond > 1):
+        raise ValueError(f"max_cond must be > 1, got {max_cond}")
+    if not (tol > 0) or not (length_scale > 0):
+        raise ValueError("tol and length_scale must be positive")
+    for name in ("q", "force", "moment"):
+        a = np.asarray(getattr(path, name))
+        bad = ~np.all(np.isfinite(a), axis=1)
+        if bad.any():
+            rows = ", ".join(str(i + 1) for i in np.flatnonzero(bad)[:20])
+            raise ValueError(f"path: non-finite {name} in row(s) {rows}")
+    cov = None
+    if isinstance(calibration, Calibration):
+        cov = calibration.full_covariance(robot)
+    elif calibration is not None:
+        cov = jnp.asarray(calibration)
+        P = len(robot.parameter_names)
+        if cov.shape != (P, P):
+            raise ValueError(f"calibration covariance must be {P}x{P}, got {cov.shape}")
+    moment = path.moment if path.has_moments else None
+    rows = _batch(
+        robot, path.q, path.force, moment, cov, float(max_cond), float(length_scale), float(tol)
+    )
+    limits = tuple((float(lo), float(hi)) for lo, hi in np.rad2deg(np.asarray(robot.joint_limits)))
+    return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)
+
+
+def write_commands(out: str | Path, comp: Compensation) -> int:
+    """Write the compensated rows (input columns, `COMMAND_COLUMNS`, `res_std_mm` with a
+    calibration, `id` where the path has labels) to `out`, atomically (a temporary file
+    renamed into place, so a failure never leaves a half-written file). Returns the
+    number of rows written."""
+    p = comp.path
+    ok = comp.ok
+    has_std = bool(np.all(np.isfinite(np.asarray(comp.rows.res_std)[ok]))) and ok.any()
+    header = list(Q_COLS + F_COLS + M_COLS) + list(COMMAND_COLUMNS)
+    if has_std:
+        header.append("res_std_mm")
+    if p.ids:
+        header.append("id")
+    q = np.rad2deg(np.asarray(p.q))
+    f, m = np.asarray(p.force), np.asarray(p.moment)
+    r = comp.rows
+    qc = np.rad2deg(np.asarray(r.qc))
+    d = np.asarray(r.deflection) * 1e3
+    res = np.linalg.norm(np.asarray(r.residual), axis=1) * 1e3
+    rot = np.linalg.norm(np.asarray(r.residual_rotation), axis=1) * 1e6
+    cond = np.asarray(r.cond)
+    std = np.asarray(r.res_std) * 1e3
+    out = Path(out)
+    fd, tmp = tempfile.mkstemp(dir=out.parent if str(out.parent) else ".", suffix=".tmp")
+    n = 0
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            w = csv.writer(fh, lineterminator="\n")
+            w.writerow(header)
+            for i in np.flatnonzero(ok):
+                row = [f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in np.r_[f[i], m[i]]]
+                row += [f"{x:.9f}" for x in qc[i]] + [f"{x:.6f}" for x in d[i]]
+                row += [f"{res[i]:.3e}", f"{rot[i]:.3e}", f"{cond[i]:.4g}"]
+                if has_std:
+                    row.append(f"{std[i]:.6f}")
+                if p.ids:
+                    row.append(p.ids[i])
+                w.writerow(row)
+                n += 1
+        os.replace(tmp, out)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return n
