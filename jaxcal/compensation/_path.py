@@ -117,7 +117,7 @@ def compensate(
     path: Dataset,
     calibration: Calibration | Float[Array, "P P"] | None = None,
     *,
-    max_cond: float = 1e4,
+    max_cond: float = 500.0,
     length_scale: float = 1.0,
     tol: float = 1e-8,
 ) -> Compensation:
