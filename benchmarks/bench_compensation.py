@@ -123,6 +123,11 @@ def main():
             f"refused {int((~ok).sum())}, max residual {r.max():.2e} m"
         )
     nb = min(args.n_baseline, args.n)
+    if nb == 0:
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(res, fh, indent=2)
+        return
     _error(robot, path.q[0], path.force[0], path.moment[0], _target(robot, path.q[0]))
     t0 = time.perf_counter()
     qc_b, nfev = baseline(robot, path, nb)

@@ -193,10 +193,14 @@ def criteria_from_observation(
     null: tuple[str, ...] = ()
     Mh, okh = _concrete(M), _concrete(ok)
     if names and Mh is not None and okh is not None and not bool(okh):
-        # Host-side naming of the null space: the parameters with weight in the
-        # eigenvector of the smallest eigenvalue.
-        _, V = np.linalg.eigh(Mh)
-        v = np.abs(V[:, 0])
+        # Host-side naming of the null space: the parameters with weight in it. The
+        # null space may have several dimensions (one q2 level: k2, Kc, s0 act as one),
+        # and then any single eigenvector in it is an arbitrary, LAPACK-dependent mix:
+        # take every eigenvector whose eigenvalue is numerically zero (the smallest one
+        # at least) and the weight of each parameter over all of them.
+        w, V = np.linalg.eigh(Mh)
+        k = max(1, int(np.sum(w <= 1e-9 * max(float(w[-1]), 1e-300))))
+        v = np.linalg.norm(V[:, :k], axis=1)
         null = tuple(n for n, a in zip(names, v, strict=True) if a > 0.1 * v.max())
     return DesignCriteria(
         names=names,
