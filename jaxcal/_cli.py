@@ -53,6 +53,17 @@ def add_fix_argument(p: argparse.ArgumentParser, why: str) -> None:
     )
 
 
+def seed(text: str) -> int:
+    """argparse type of `--seed`: a non-negative integer that fits a 64-bit key."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 2**63 - 1, got {text}")
+    return v
+
+
 def fix_names(values: Sequence[str]) -> list[str]:
     """The parameter names given with `--fix` (flattening comma lists)."""
     return [s.strip() for v in values for s in v.split(",") if s.strip()]
@@ -154,13 +165,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     # explicitly (the library never flips global config on import).
     jax.config.update("jax_enable_x64", True)
     from ._io import DataError
+    from ._simulate import DeflectionError
 
     if getattr(args, "uses_cache", True) and not getattr(args, "no_cache", False):
         _enable_cache()
 
     try:
         return int(args.func(args) or 0)
-    except (DataError, ValueError) as e:
+    except (DataError, ValueError, DeflectionError) as e:
         print(f"jaxcal {args.command}: error: {e}", file=sys.stderr)
         return 2
     except BrokenPipeError:

@@ -68,10 +68,11 @@ def run(args: argparse.Namespace) -> int:
 
         from .compensation import plot_compensation
 
-        ax = plot_compensation(comp)
-        ax.figure.tight_layout()
-        ax.figure.savefig(args.plot, dpi=120)
-        plt.close(ax.figure)
+        fig, ax = plt.subplots(figsize=(8, 4))
+        plot_compensation(comp, ax)
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        plt.close(fig)
     s = comp.summary()
     refused = s["refused"]
     for r in refused:

@@ -16,7 +16,7 @@ import sys
 import jax.numpy as jnp
 import numpy as np
 
-from ._cli import print_json
+from ._cli import print_json, seed
 
 
 def demo_experiment(robot, horizontal_fraction: float = 0.45):
@@ -67,7 +67,7 @@ def register(sub) -> None:
             "estimates, their uncertainties and the true values."
         ),
     )
-    p.add_argument("--seed", type=int, default=0, metavar="N", help="random seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, metavar="N", help="random seed (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from ._cli import add_robot_argument, format_table, print_json
+from ._cli import add_robot_argument, check_output_path, format_table, print_json, seed
 
 
 def register(sub) -> None:
@@ -63,7 +63,7 @@ def register(sub) -> None:
     )
     p.add_argument("--starts", type=int, default=8, metavar="N", help="BFGS starts (8)")
     p.add_argument("--steps", type=int, default=150, metavar="S", help="BFGS steps per round (150)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the starts (0)")
+    p.add_argument("--seed", type=seed, default=0, metavar="S", help="seed of the starts (0)")
     p.add_argument(
         "--pool",
         type=int,
@@ -74,6 +74,9 @@ def register(sub) -> None:
     )
     p.add_argument("-o", "--output", metavar="DESIGN.csv", default=None, help="write the design")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress on stderr (off when not a tty)"
+    )
     p.set_defaults(func=run_design)
 
     e = sub.add_parser(
@@ -114,6 +117,7 @@ def run_design(args: argparse.Namespace) -> int:
     from ._io import write_dataset
     from ._robot import load_robot
 
+    check_output_path(args.output, "-o")
     if args.configs < 1 or args.starts < 1 or args.steps < 1 or args.pool < 0:
         raise ValueError("--configs, --starts and --steps must be positive, --pool >= 0")
     G = args.groups if args.groups is not None else (3 if args.parameters == "aggregated" else None)
@@ -132,7 +136,7 @@ def run_design(args: argparse.Namespace) -> int:
         seed=args.seed,
         max_steps=args.steps,
         pool=args.pool,
-        progress=True,
+        progress=not args.no_progress and sys.stderr.isatty(),
         model=args.model,
     )
     if args.output:

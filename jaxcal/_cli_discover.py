@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._cli import add_robot_argument, format_table, print_json
+from ._cli import add_robot_argument, check_output_path, format_table, print_json
 
 
 def register(sub) -> None:
@@ -26,6 +26,9 @@ def register(sub) -> None:
     add_robot_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
+        "--no-progress", action="store_true", help="no progress on stderr (off when not a tty)"
+    )
+    p.add_argument(
         "--refine",
         type=int,
         default=3,
@@ -43,13 +46,17 @@ def run(args: argparse.Namespace) -> int:
     from ._io import read_dataset
     from ._robot import load_robot
 
+    check_output_path(args.plot, "--plot")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
+    show = not args.no_progress and sys.stderr.isatty()
     rep = discover(
         robot,
         data,
         refine=args.refine,
-        progress=lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr),
+        progress=(lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr))
+        if show
+        else None,
     )
     if args.plot:
         import matplotlib

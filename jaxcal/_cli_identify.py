@@ -75,9 +75,10 @@ def run(args: argparse.Namespace) -> int:
         res = identify(robot, data, args.method, fix=tuple(fix_names(args.fix)), robust=args.robust)
     for w in caught:
         print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
+    failed = not bool(res.converged)
     saved = None
     if args.save_robot:
-        if not bool(res.converged):
+        if failed:
             print(
                 f"jaxcal identify: error: the fit did not converge; {args.save_robot} not written",
                 file=sys.stderr,
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         if saved:
             d["saved_robot"] = saved
         print_json(d)
-        return 0
+        return 1 if failed else 0
     print(res.table())
     rows = res.outliers(args.outlier_threshold)
     if rows:
@@ -102,4 +103,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"no outliers (|residual|/sigma > {args.outlier_threshold:g})")
     if saved:
         print(f"calibrated robot written to {saved} (use it with --robot {saved})")
+    if failed:
+        print("jaxcal identify: error: the fit did not converge", file=sys.stderr)
+        return 1
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._cli import add_fix_argument, add_robot_argument, fix_names, print_json
+from ._cli import add_fix_argument, add_robot_argument, fix_names, print_json, seed
 from ._identify import METHODS
 
 
@@ -47,7 +47,7 @@ def register(sub) -> None:
         help="heavy-tailed noise: Student-t with NU > 2 degrees of freedom, scaled to the "
         "same standard deviation",
     )
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, metavar="S", help="random seed (default 0)")
     p.add_argument(
         "--chunk",
         type=int,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._cli import add_robot_argument
+from ._cli import add_robot_argument, check_output_path, seed
 
 
 def register(sub) -> None:
@@ -29,7 +29,7 @@ def register(sub) -> None:
         help="add Gaussian noise of standard deviation S mm to each coordinate",
     )
     p.add_argument(
-        "--seed", type=int, default=0, metavar="N", help="random seed for the noise (default 0)"
+        "--seed", type=seed, default=0, metavar="N", help="random seed for the noise (default 0)"
     )
     p.add_argument(
         "-o",
@@ -46,13 +46,30 @@ def run(args: argparse.Namespace) -> int:
     from ._robot import load_robot
     from ._simulate import simulate
 
+    check_output_path(args.output, "-o")
     if args.noise_mm is not None and args.noise_mm < 0:
         raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot, require_deflection=False, ignore_deflection=True)
     noise = None if args.noise_mm is None else args.noise_mm * 1e-3
     out = simulate(robot, data, noise_std=noise, key=args.seed)
-    write_dataset(args.output or sys.stdout, out, sigma=noise is not None)
+    if args.output:
+        # Written whole to a temporary file first: a failure never leaves half a file.
+        import os
+        import tempfile
+        from pathlib import Path
+
+        folder = Path(args.output).parent
+        fd, tmp = tempfile.mkstemp(dir=folder if str(folder) else ".", suffix=".tmp")
+        os.close(fd)
+        try:
+            write_dataset(tmp, out, sigma=noise is not None)
+            os.replace(tmp, args.output)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    else:
+        write_dataset(sys.stdout, out, sigma=noise is not None)
     if args.output:
         print(f"wrote {len(out)} rows to {args.output}", file=sys.stderr)
     return 0

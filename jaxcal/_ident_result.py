@@ -64,6 +64,27 @@ class IdentificationResult(eqx.Module):
         z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
         return [int(i) for i in np.flatnonzero(z > threshold)]
 
+    def intervals95(self) -> np.ndarray:
+        """Host-side 95 % intervals `(p, 2)` for reports: every parameter here (joint
+        compliances, `Kc`, `s0`) is strictly positive, so its interval comes from the
+        log-parameter, `estimate · exp(±1.96 std/estimate)` (never below zero; close to
+        the Wald interval `ci95` when the std is small); a non-positive estimate keeps
+        the Wald interval."""
+        est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
+        wald = np.asarray(self.ci95, float)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            r = Z95 * std / est
+            log = np.stack([est * np.exp(-r), est * np.exp(r)], axis=-1)
+        return np.where((est > 0)[:, None] & np.isfinite(log), log, wald)
+
+    def undetermined(self, limit: float = 0.5) -> list[str]:
+        """Names of parameters the data leave effectively undetermined: relative
+        standard error above `limit` (50 %)."""
+        est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = std / np.abs(est)
+        return [n for n, r in zip(self.names, rel, strict=True) if not r <= limit]
+
     def parameter(self, name: str) -> tuple[float, float]:
         """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""
         full = resolve_name(name, self.names)
@@ -74,10 +95,13 @@ class IdentificationResult(eqx.Module):
         """The JSON object of the command line: method, parameters (value, std), RMS in
         mm, reduced χ², number of rows and outlier rows (1-based, or their ids)."""
         est, std = np.asarray(self.estimate), np.asarray(self.std)
+        ci = self.intervals95()
         params = {
-            n: {"value": float(v), "std": float(s)}
-            for n, v, s in zip(self.names, est, std, strict=True)
+            n: {"value": float(v), "std": float(s), "ci95": [float(c[0]), float(c[1])]}
+            for n, v, s, c in zip(self.names, est, std, ci, strict=True)
         }
+        for n in self.undetermined():
+            params[n]["undetermined"] = True
         rows = self.outliers(threshold)
         d = {
             "method": self.method,
@@ -104,9 +128,10 @@ class IdentificationResult(eqx.Module):
         if truth is not None:
             headers += ["true", "error/std"]
         rows = []
+        ci = self.intervals95()
         for i, n in enumerate(self.names):
             v, s = float(self.estimate[i]), float(self.std[i])
-            lo, hi = (float(x) for x in self.ci95[i])
+            lo, hi = (float(x) for x in ci[i])
             row: list[object] = [n.split("_")[0], v, s, lo, hi, parameter_units(n)]
             if truth is not None:
                 t = truth.get(n, float("nan"))
@@ -123,6 +148,14 @@ class IdentificationResult(eqx.Module):
             f"{float(self.rms) * 1e3:.4f} mm, reduced chi2 {float(self.chi2_red):.3f} "
             f"(dof {self.dof})" + ("" if bool(self.converged) else "  [NOT CONVERGED]")
         )
+        lines.append("95% intervals from the log-parameter (the parameters are positive).")
+        for n in self.undetermined():
+            v, s = self.parameter(n)
+            rel = f" (relative std {100 * s / abs(v):.0f} % > 50 %)" if v else ""
+            lines.append(
+                f"{n.split('_')[0]} is effectively undetermined by these data{rel}: hold it "
+                "with --fix, or measure at more q2 levels"
+            )
         return "\n".join(lines)
 
 

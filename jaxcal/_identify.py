@@ -31,7 +31,14 @@ from ._parameters import get_parameters, set_parameters
 from ._robot import Robot
 from ._two_step import solve_two_step_jit, two_step_system
 
-__all__ = ["identify", "METHODS", "identifiability", "check_inputs", "design_matrix"]
+__all__ = [
+    "identify",
+    "METHODS",
+    "identifiability",
+    "check_inputs",
+    "design_matrix",
+    "plausibility",
+]
 
 METHODS = ("linear", "two-step", "nonlinear")
 
@@ -255,7 +262,56 @@ def identify(
             "the estimates are not reliable",
             stacklevel=2,
         )
+    for msg in plausibility(robot, res):
+        warnings.warn(msg, stacklevel=2)
     return res
+
+
+def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:
+    # Two-sided 99.9 % band of χ²(dof) by the Wilson–Hilferty cube-root normal
+    # approximation (relative error < 1 % of the quantile for dof ≥ 10).
+    k = max(dof, 1)
+    c = 2.0 / (9.0 * k)
+    lo = k * max(1.0 - c - z * float(np.sqrt(c)), 0.0) ** 3
+    hi = k * (1.0 - c + z * float(np.sqrt(c))) ** 3
+    return lo, hi
+
+
+def plausibility(robot: Robot, res: IdentificationResult) -> list[str]:
+    """Warnings for results that should not pass silently: a reduced χ² outside its
+    99.9 % band for the degrees of freedom (residuals far smaller or larger than the
+    stated σ: wrong units, wrong σ, gross errors or a missing effect), and estimates that
+    are not positive or more than 10× from the robot file's value."""
+    out = []
+    chi2_red = float(res.chi2_red)
+    if res.dof >= 1 and np.isfinite(chi2_red):
+        lo, hi = _chi2_band(res.dof)
+        band = f"[{lo / res.dof:.3g}, {hi / res.dof:.3g}] for {res.dof} dof"
+        ratio = float(np.sqrt(max(chi2_red, 1e-300)))
+        if chi2_red * res.dof < lo:
+            out.append(
+                f"reduced chi2 {chi2_red:.3g} is below its 99.9 % band {band}: the residuals "
+                f"are {1 / ratio:.3g}x smaller than the stated sigma. Are the deflections in "
+                "mm (not m), and is sigma_mm right?"
+            )
+        elif chi2_red * res.dof > hi:
+            out.append(
+                f"reduced chi2 {chi2_red:.3g} is above its 99.9 % band {band}: the residuals "
+                f"are {ratio:.3g}x larger than the stated sigma. Is sigma_mm right, are there "
+                "gross errors, or is the model missing an effect (jaxcal discover)?"
+            )
+    p0 = dict(zip(robot.parameter_names, np.asarray(get_parameters(robot)), strict=True))
+    for n, v in zip(res.names, np.asarray(res.estimate), strict=True):
+        ref = float(p0[n])
+        short = n.split("_")[0]
+        if v <= 0:
+            out.append(f"{short} estimate {v:.4g} is not positive: no spring has that")
+        elif ref > 0 and not ref / 10 <= v <= ref * 10:
+            out.append(
+                f"{short} estimate {v:.4g} is more than 10x from the robot file's {ref:.4g}: "
+                "check the units of the data and of the robot file"
+            )
+    return out
 
 
 # Module-level jitted cores: repeated calls with equal shapes reuse one compilation.

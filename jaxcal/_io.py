@@ -125,6 +125,25 @@ def _parse(value: str) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def _check_dialect(path: Path, rows: list[list[str]]) -> None:
+    """Name the common near-misses of the format before reading columns: comment lines
+    and files separated by semicolons or tabs (what some locales' spreadsheets write)."""
+    for i, r in enumerate(rows):
+        if r and r[0].lstrip().startswith("#"):
+            raise DataError(
+                f"{path}, line {i + 1}: starts with '#': comment lines are not part of the "
+                "data format; remove them (the first line is the header)"
+            )
+    head = ",".join(rows[0])
+    if len(rows[0]) == 1:
+        for sep, name in ((";", "semicolon"), ("\t", "tab")):
+            if sep in head:
+                raise DataError(
+                    f"{path}: the header is {name}-separated; jaxcal reads comma-separated "
+                    "files (decimal points, not commas)"
+                )
+
+
 def read_dataset(
     path: str | Path,
     robot: Robot | None = None,
@@ -147,13 +166,22 @@ def read_dataset(
     Raises `DataError` listing every problem as `file, row R (line L), column C: ...`.
     """
     path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path}: is a directory, not a CSV file")
     try:
-        with path.open(newline="") as fh:
+        # utf-8-sig: spreadsheet programs start a UTF-8 CSV with a byte-order mark.
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
+    except UnicodeDecodeError as e:
+        raise DataError(
+            f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
+            "save it as UTF-8 (e.g. 'CSV UTF-8' in a spreadsheet program)"
+        ) from None
     except OSError as e:
         raise DataError(f"{path}: cannot read: {e.strerror}") from None
     if not rows:
         raise DataError(f"{path}: empty file (a header row is required)")
+    _check_dialect(path, rows)
     header = [h.strip() for h in rows[0]]
     problems: list[str] = []
     known = set(Q_COLS + F_COLS + M_COLS + D_COLS + OPTIONAL)

@@ -143,6 +143,28 @@ class MonteCarloResult:
     def trials_per_s(self) -> float:
         return self.trials / self.seconds if self.seconds > 0 else math.inf
 
+    def flags(self, threshold: float = 0.5) -> dict[str, str]:
+        """Parameters whose |bias| exceeds `threshold` of their spread (std), each with
+        the likely cause: the method's own model mismatch when its noise-free estimate is
+        already off by that much, else bias of the estimator under noise."""
+        out = {}
+        for i, n in enumerate(self.names):
+            s = float(self.std[i])
+            if not s > 0 or not abs(float(self.bias[i])) > threshold * s:
+                continue
+            z = abs(float(self.bias[i])) / s
+            zf = abs(float(self.noise_free[i] - self.true[i])) / s
+            cov = 100 * float(self.coverage95[i])
+            if zf > threshold:
+                why = (
+                    f"model mismatch of the {self.method} method: its noise-free estimate is "
+                    f"already {zf:.2g} σ off (the data come from the full model)"
+                )
+            else:
+                why = "bias of the estimator under noise (nonlinearity of the fit)"
+            out[n] = f"|bias| = {z:.2g} σ, coverage {cov:.1f} %: {why}"
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON form of `jaxcal montecarlo --json`."""
         params = {}
@@ -171,6 +193,7 @@ class MonteCarloResult:
             "chunk": self.chunk,
             "devices": self.devices,
             "parameters": params,
+            "flags": self.flags(),
         }
 
     def table(self) -> str:
@@ -191,4 +214,10 @@ class MonteCarloResult:
                 ]
             )
         head = ["parameter", "true", "mean", "bias", "std", "predicted_std", "rmse", "coverage95"]
-        return format_table(head, rows)
+        flags = self.flags()
+        for row in rows:
+            row.append("BIAS" if row[0] in flags else "")
+        text = format_table([*head, "flag"], rows)
+        for n, msg in flags.items():
+            text += f"\nBIAS {n}: {msg}"
+        return text

@@ -119,6 +119,60 @@ class Robot(eqx.Module):
         return names
 
 
+#: Keys a robot file may hold, per object (`masses[i]` entries under "masses").
+_KNOWN_KEYS: dict[str, tuple[str, ...]] = {
+    "": (
+        "name",
+        "description",
+        "geometry_m",
+        "tool_point_m",
+        "parallelogram",
+        "joint_compliance_urad_per_Nm",
+        "compensator",
+        "masses",
+        "joint_limits_deg",
+        "experiment",
+        "calibration",
+    ),
+    "geometry_m": _GEOMETRY_KEYS,
+    "compensator": ("lc_m", "l2_m", "Kc_N_per_m", "s0_m"),
+    "masses": ("name", "body", "kg", "at_m"),
+    "experiment": (
+        "q2_deg",
+        "q3_deg",
+        "min_wrist_height_m",
+        "min_wrist_radius_m",
+        "max_load_kg",
+        "noise_std_mm",
+    ),
+}
+
+
+def _check_keys(d: dict) -> None:
+    """Refuse unknown keys (a misspelt key would otherwise be silently ignored, and the
+    robot built without what the user meant), naming the nearest known one."""
+    import difflib
+
+    def check(obj, where: str, known: tuple[str, ...]):
+        if not isinstance(obj, dict):
+            return
+        for k in obj:
+            if k not in known:
+                near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+                hint = f"; did you mean {near[0]!r}?" if near else ""
+                raise ValueError(
+                    f"robot file: unknown key {where}{k!r}{hint} (known: {', '.join(known)})"
+                )
+
+    check(d, "", _KNOWN_KEYS[""])
+    for section in ("geometry_m", "compensator", "experiment"):
+        check(d.get(section), f"{section}.", _KNOWN_KEYS[section])
+    masses = d.get("masses")
+    if isinstance(masses, list):
+        for i, m in enumerate(masses):
+            check(m, f"masses[{i}].", _KNOWN_KEYS["masses"])
+
+
 def _require(d: dict, key: str, where: str) -> Any:
     if not isinstance(d, dict) or key not in d:
         raise ValueError(f"robot file: missing key {where}{key!r}")
@@ -151,6 +205,7 @@ def robot_from_dict(d: dict, *, source: str = "<dict>") -> Robot:
 def _robot_from_dict(d: dict) -> Robot:
     if not isinstance(d, dict):
         raise ValueError("robot file: top level must be a JSON object")
+    _check_keys(d)
     name = str(_require(d, "name", ""))
     geo = _require(d, "geometry_m", "")
     geometry = [_number(_require(geo, k, "geometry_m."), f"geometry_m.{k}") for k in _GEOMETRY_KEYS]

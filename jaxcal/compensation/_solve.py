@@ -169,7 +169,10 @@ def compensate_row(
 
     solver = optx.FixedPointIteration(rtol=1e-12, atol=1e-14)
     args = (robot, force, moment, (p_t, R_t), xl_frozen)
-    sol = optx.fixed_point(step, solver, q, args, max_steps=_MAX_STEPS, throw=False)
+    # Start from the first-order correction of the deflection already computed at the
+    # programmed angles: the first step of the iteration, without its equilibrium solve.
+    q0 = q - lu_solve(*lu, jax.lax.stop_gradient(jnp.concatenate([deflection / scale, rotation])))
+    sol = optx.fixed_point(step, solver, q0, args, max_steps=_MAX_STEPS, throw=False)
     qc = sol.value
     solved = sol.result == optx.RESULTS.successful
 
