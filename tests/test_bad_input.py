@@ -1,0 +1,223 @@
+"""Bad input never reaches a traceback: every case runs through the command line
+in-process and must exit with the documented code, name the culprit, print no
+traceback, and leave no output file behind. Plus the plausibility warnings, both ways."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcal
+from jaxcal._cli import main
+from jaxcal.internal import make_result
+
+EXAMPLE = "example_calibration.csv"
+
+
+def run(args, capsys):
+    rc = main([str(a) for a in args])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    return rc, out.out, out.err
+
+
+def example_lines(data_dir):
+    return (data_dir / EXAMPLE).read_text().splitlines()
+
+
+def write(path, lines, encoding="utf-8"):
+    path.write_bytes(("\n".join(lines) + "\n").encode(encoding))
+    return path
+
+
+@pytest.fixture
+def example(data_dir):
+    return data_dir / EXAMPLE
+
+
+# ------------------------------------------------------------------ output paths
+
+
+@pytest.mark.parametrize(
+    "make_args",
+    [
+        lambda ex, t: ["simulate", ex, "-o", t / "missing" / "out.csv"],
+        lambda ex, t: ["simulate", ex, "-o", f"{t}/"],
+        lambda ex, t: ["design", "-o", t / "missing" / "d.csv"],
+        lambda ex, t: ["discover", ex, "--plot", t / "missing" / "p.png"],
+        lambda ex, t: ["identify", ex, "--save-robot", t / "missing" / "r.json"],
+        lambda ex, t: ["compensate", ex, "-o", t / "missing" / "c.csv"],
+    ],
+    ids=["simulate-dir", "simulate-is-dir", "design", "discover-plot", "save-robot", "comp"],
+)
+def test_bad_output_path_refused_before_any_work(make_args, example, tmp_path, capsys):
+    t0 = time.perf_counter()
+    rc, _, err = run(make_args(example, tmp_path), capsys)
+    assert rc == 2
+    assert ("does not exist" in err) or ("is a directory" in err)
+    assert time.perf_counter() - t0 < 5.0
+    assert not (tmp_path / "missing").exists()
+
+
+def test_robot_is_a_directory(example, tmp_path, capsys):
+    rc, _, err = run(["simulate", example, "--robot", tmp_path], capsys)
+    assert rc == 2 and "is a directory" in err
+
+
+@pytest.mark.parametrize("cmd", ["simulate", "montecarlo", "design", "demo"])
+def test_seed_out_of_range(cmd, example, capsys):
+    args = [cmd] + ([example] if cmd in ("simulate", "montecarlo") else [])
+    with pytest.raises(SystemExit) as e:
+        main([str(a) for a in args] + ["--seed", "99999999999999999999"])
+    assert e.value.code == 2
+    assert "--seed" in capsys.readouterr().err
+
+
+def test_equilibrium_failure_is_a_message_and_nothing_is_written(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    cells = lines[3].split(",")
+    cells[lines[0].split(",").index("fz_N")] = "-1e7"
+    bad = write(tmp_path / "huge.csv", [lines[0], lines[1], lines[2], ",".join(cells)])
+    out = tmp_path / "out.csv"
+    rc, _, err = run(["simulate", bad, "-o", out], capsys)
+    assert rc == 2 and "did not converge" in err and "row(s) 3" in err
+    assert not out.exists() and not list(tmp_path.glob("*.tmp"))
+
+
+def test_non_converged_identify_exits_nonzero(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    head = lines[0].split(",")
+    cells = lines[5].split(",")
+    cells[head.index("fz_N")] = "-1e7"
+    lines[5] = ",".join(cells)
+    bad = write(tmp_path / "huge.csv", lines)
+    rc, _, err = run(["identify", bad, "--json"], capsys)
+    assert rc == 1 and "did not converge" in err
+
+
+# ------------------------------------------------------------------ file dialects
+
+
+def test_latin1_file_named(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    lines[0] += ",id"
+    lines[1:] = [ln + ",Maß" for ln in lines[1:]]
+    bad = write(tmp_path / "latin1.csv", lines, encoding="latin-1")
+    rc, _, err = run(["identify", bad], capsys)
+    assert rc == 2 and "latin1.csv" in err and "not UTF-8" in err
+
+
+def test_utf8_bom_is_read(robot, example, tmp_path):
+    text = example.read_text()
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    a = jaxcal.read_dataset(tmp_path / "bom.csv", robot)
+    b = jaxcal.read_dataset(example, robot)
+    np.testing.assert_array_equal(np.asarray(a.deflection), np.asarray(b.deflection))
+
+
+@pytest.mark.parametrize(
+    "sep, says", [(";", "semicolon-separated"), ("\t", "tab-separated")], ids=["semicolon", "tab"]
+)
+def test_other_separators_named(sep, says, example, tmp_path, capsys):
+    lines = [ln.replace(",", sep) for ln in example_lines(example.parent)]
+    rc, _, err = run(["identify", write(tmp_path / "x.csv", lines)], capsys)
+    assert rc == 2 and says in err and "jaxcal reads comma-separated" in err
+
+
+def test_comment_lines_named(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    lines.insert(0, "# exported by the tracker software")
+    rc, _, err = run(["identify", write(tmp_path / "c.csv", lines)], capsys)
+    assert rc == 2 and "line 1" in err and "comment lines" in err
+
+
+# ------------------------------------------------------------------ robot files
+
+
+def test_unknown_robot_key_names_the_nearest(example, tmp_path, capsys):
+    d = jaxcal.robot_to_dict(jaxcal.load_robot())
+    d["compensater"] = d.pop("compensator")
+    (tmp_path / "r.json").write_text(json.dumps(d))
+    rc, _, err = run(["simulate", example, "--robot", tmp_path / "r.json"], capsys)
+    assert rc == 2 and "'compensater'" in err and "did you mean 'compensator'" in err
+    d = jaxcal.robot_to_dict(jaxcal.load_robot())
+    d["geometry_m"]["a22"] = 1.0
+    with pytest.raises(ValueError, match=r"geometry_m\.'a22'.*did you mean 'a2'"):
+        jaxcal.robot_from_dict(d)
+
+
+# ------------------------------------------------------------------ plausibility
+
+
+def test_deflections_in_metres_warn_and_example_is_silent(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    head = lines[0].split(",")
+    idx = [head.index(c) for c in ("dx_mm", "dy_mm", "dz_mm")]
+    rows = []
+    for ln in lines[1:]:
+        c = ln.split(",")
+        for i in idx:
+            c[i] = repr(float(c[i]) / 1000)
+        rows.append(",".join(c))
+    metres = write(tmp_path / "m.csv", [lines[0], *rows])
+    rc, _, err = run(["identify", metres, "--method", "linear"], capsys)
+    assert rc == 0
+    assert "smaller than the stated sigma" in err and "in mm (not m)" in err
+    assert "more than 10x from the robot file" in err
+    rc, _, err = run(["identify", example, "--method", "linear"], capsys)
+    assert rc == 0 and "warning: reduced chi2" not in err and "10x" not in err
+
+
+def test_sigma_too_small_warns(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    lines = [lines[0] + ",sigma_mm"] + [ln + ",0.002" for ln in lines[1:]]
+    rc, _, err = run(["identify", write(tmp_path / "s.csv", lines), "--method", "linear"], capsys)
+    assert rc == 0 and "larger than the stated sigma" in err
+
+
+def test_positive_parameters_get_positive_intervals(example, capsys):
+    rc, out, _ = run(["identify", example, "--json"], capsys)
+    d = json.loads(out)
+    for p in d["parameters"].values():
+        lo, hi = p["ci95"]
+        assert 0 < lo < p["value"] < hi
+    # Kc: 42 % relative std on the example, determined (barely); not flagged.
+    assert "undetermined" not in d["parameters"]["Kc_N_per_m"]
+
+
+def test_undetermined_is_said(robot):
+    names = robot.parameter_names
+    est = jaxcal.get_parameters(robot)
+    std = 0.01 * est
+    std = std.at[6].set(0.8 * est[6])  # Kc: 80 % relative std
+    res = make_result(
+        "nonlinear",
+        names,
+        (True,) * 8,
+        est,
+        jnp.diag(std**2),
+        jnp.zeros((10, 3)),
+        jnp.full(10, 2e-5),
+        jnp.array(True),
+    )
+    assert res.undetermined() == ["Kc_N_per_m"]
+    table = res.table()
+    assert "Kc is effectively undetermined by these data (relative std 80 % > 50 %)" in table
+    ci = res.intervals95()
+    assert ci[6, 0] > 0 and np.asarray(res.ci95)[6, 0] < 0  # Wald would go negative
+    np.testing.assert_allclose(ci[:6], np.asarray(res.ci95)[:6], rtol=2e-4)
+
+
+def test_montecarlo_flags_model_mismatch_bias(robot, example):
+    design = jaxcal.read_dataset(example, robot, require_deflection=False, ignore_deflection=True)
+    res = jaxcal.monte_carlo(robot, design, trials=4000, method="linear", seed=1)
+    z = np.abs(res.bias) / res.std
+    flags = res.flags()
+    assert set(flags) == {n for n, v in zip(res.names, z, strict=True) if v > 0.5}
+    assert flags, "the linear method on full-model data is biased (README, Monte-Carlo)"
+    assert all("model mismatch of the linear method" in m for m in flags.values())
+    assert "BIAS" in res.table()
