@@ -95,13 +95,10 @@ class IdentificationResult(eqx.Module):
         """The JSON object of the command line: method, parameters (value, std), RMS in
         mm, reduced χ², number of rows and outlier rows (1-based, or their ids)."""
         est, std = np.asarray(self.estimate), np.asarray(self.std)
-        ci = self.intervals95()
         params = {
-            n: {"value": float(v), "std": float(s), "ci95": [float(c[0]), float(c[1])]}
-            for n, v, s, c in zip(self.names, est, std, ci, strict=True)
+            n: {"value": float(v), "std": float(s)}
+            for n, v, s in zip(self.names, est, std, strict=True)
         }
-        for n in self.undetermined():
-            params[n]["undetermined"] = True
         rows = self.outliers(threshold)
         d = {
             "method": self.method,
@@ -110,6 +107,12 @@ class IdentificationResult(eqx.Module):
             "chi2_red": float(self.chi2_red),
             "n_rows": int(self.residuals.shape[0]),
             "outliers": [ids[i] if ids and ids[i] else i + 1 for i in rows],
+            # Log-parameter intervals (positive parameters), see `intervals95`.
+            "ci95": {
+                n: [float(c[0]), float(c[1])]
+                for n, c in zip(self.names, self.intervals95(), strict=True)
+            },
+            "undetermined": self.undetermined(),
         }
         if self.fixed:
             d["fixed"] = {
