@@ -50,6 +50,12 @@ def register(sub) -> None:
         help="report rows whose largest |residual|/sigma exceeds T (default 3)",
     )
     p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="keep rows named as gross errors in the fit (by default they are excluded; "
+        "either way they are named)",
+    )
+    p.add_argument(
         "--save-robot",
         metavar="CALIBRATED.json",
         help="write the robot file with the identified parameters and a 'calibration' block "
@@ -72,7 +78,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = identify(robot, data, args.method, fix=tuple(fix_names(args.fix)), robust=args.robust)
+        res = identify(
+            robot,
+            data,
+            args.method,
+            fix=tuple(fix_names(args.fix)),
+            robust=args.robust,
+            keep_outliers=args.keep_outliers,
+        )
     for w in caught:
         print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
     failed = not bool(res.converged)

@@ -37,8 +37,10 @@ class IdentificationResult(eqx.Module):
     - `steps`: solver steps (0 for the closed-form methods).
     - `fixed_values` `(k,)`: values of the parameters held fixed, user units.
 
-    Static: `method`, `names` (fitted parameters with units), `dof` (= 3n − p),
-    `fixed` (names of parameters held at the robot's value).
+    Static: `method`, `names` (fitted parameters with units), `dof` (= 3n − p, kept
+    rows only), `fixed` (names of parameters held at the robot's value), `gross_rows`
+    (0-based rows named as gross errors, see `jaxcal._gross`) and `gross_excluded`
+    (whether the estimates exclude them).
     """
 
     estimate: Float[Array, " p"]
@@ -56,13 +58,32 @@ class IdentificationResult(eqx.Module):
     names: tuple[str, ...] = eqx.field(static=True)
     dof: int = eqx.field(static=True)
     fixed: tuple[str, ...] = eqx.field(static=True, default=())
+    gross_rows: tuple[int, ...] = eqx.field(static=True, default=())
+    gross_excluded: bool = eqx.field(static=True, default=False)
 
     # ----- host-side reporting (not traceable; for one unbatched result) -----
 
     def outliers(self, threshold: float = 3.0) -> list[int]:
         """0-based rows whose largest |standardized residual| exceeds `threshold`."""
         z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
-        return [int(i) for i in np.flatnonzero(z > threshold)]
+        return [int(i) for i in np.flatnonzero(z > threshold) if i not in self.gross_rows]
+
+    def gross_errors(self) -> list[tuple[int, float]]:
+        """`(row, largest |residual|/σ)` of the rows named as gross errors (0-based)."""
+        z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
+        return [(i, float(z[i])) for i in self.gross_rows]
+
+    def gross_report(self, ids: tuple[str, ...] = ()) -> list[str]:
+        """One line per gross error, as the command line prints them."""
+        lines = []
+        for i, z in self.gross_errors():
+            label = ids[i] if ids and ids[i] else str(i + 1)
+            if self.gross_excluded:
+                tail = "estimates below exclude it (--keep-outliers to include)"
+            else:
+                tail = "the estimates include it and are not to be trusted"
+            lines.append(f"row {label}: {z:.0f} σ, likely a gross error; {tail}")
+        return lines
 
     def intervals95(self) -> np.ndarray:
         """Host-side 95 % intervals `(p, 2)` for reports: every parameter here (joint
@@ -113,6 +134,11 @@ class IdentificationResult(eqx.Module):
                 for n, c in zip(self.names, self.intervals95(), strict=True)
             },
             "undetermined": self.undetermined(),
+            "gross_errors": [
+                {"row": ids[i] if ids and ids[i] else i + 1, "sigma": z}
+                for i, z in self.gross_errors()
+            ],
+            "gross_errors_excluded": self.gross_excluded,
         }
         if self.fixed:
             d["fixed"] = {

@@ -11,6 +11,7 @@ value with a warning. No singular matrix is ever inverted.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import equinox as eqx
@@ -18,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._gross import critical_w, exclude_rows, finalise_excluded, w_statistics
 from ._ident_result import IdentificationResult, resolve_name
 from ._identification import (
     _nonlinear_with_groups,
@@ -187,6 +189,8 @@ def identify(
     robust: bool = False,
     huber_delta: float = 1.5,
     max_steps: int = 64,
+    screen_gross: bool = True,
+    keep_outliers: bool = False,
 ) -> IdentificationResult:
     """Identify the elastostatic parameters of `robot` from measured `data`.
 
@@ -198,6 +202,10 @@ def identify(
       (a warning says so).
     - `robust`: Huber loss (threshold `huber_delta` σ) instead of least squares
       (nonlinear method only).
+    - `screen_gross`: find gross errors one row at a time (`jaxcal._gross`: the
+      w-statistic against a Bonferroni critical value, 0.1 % false alarms per data set)
+      and, unless `keep_outliers`, exclude them from the estimates. Named in
+      `result.gross_errors()`; a warning says so.
 
     Raises `ValueError` for float64 off, missing deflections, non-finite values, joint
     angles outside the limits, and parameters the data cannot determine (named, with
@@ -248,14 +256,18 @@ def identify(
             stacklevel=2,
         )
     free = tuple(n not in fixed for n in names)
-    if method == "linear":
-        res = _linear(robot, data, free)
-    elif method == "two-step":
-        res = _two_step(robot, data, free)
-    else:
-        res = _nonlinear(
-            robot, data, free, "huber" if robust else "l2", float(huber_delta), int(max_steps)
-        )
+
+    def fit(d: Dataset) -> IdentificationResult:
+        if method == "linear":
+            return _linear(robot, d, free)
+        if method == "two-step":
+            return _two_step(robot, d, free)
+        loss = "huber" if robust else "l2"
+        return _nonlinear(robot, d, free, loss, float(huber_delta), int(max_steps))
+
+    res = fit(data)
+    if screen_gross:
+        res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
     if not bool(res.converged):
         warnings.warn(
             f"the {method} fit did not converge (or its design is numerically singular); "
@@ -265,6 +277,36 @@ def identify(
     for msg in plausibility(robot, res):
         warnings.warn(msg, stacklevel=2)
     return res
+
+
+def _screen_gross(res, data, design, fit, *, exclude: bool):
+    # Rows are found one at a time with the earlier ones excluded (a gross error drags
+    # the fit, so a single pass would name many innocent rows); with `exclude=False`
+    # the rows found are named but the estimates are those of the fit with every row.
+    crit = critical_w(3 * len(data))
+    limit = max(1, len(data) // 10)
+    rows: list[int] = []
+    full, cur = res, res
+    while len(rows) < limit:
+        w = w_statistics(cur, design, rows)
+        i = int(np.argmax(w))
+        if not w[i] > crit:
+            break
+        rows.append(i)
+        cur = fit(exclude_rows(data, rows))
+    if not rows:
+        return res
+    cur = finalise_excluded(cur, data, rows)
+    if len(rows) == limit and w_statistics(cur, design, rows).max() > crit:
+        warnings.warn(
+            f"more than {limit} rows look like gross errors; the data set may be wrong as "
+            "a whole (units, frames, sign of the loads)",
+            stacklevel=3,
+        )
+    out = cur if exclude else dataclasses.replace(full, gross_rows=tuple(rows))
+    for line in out.gross_report(data.ids):
+        warnings.warn(line, stacklevel=3)
+    return out
 
 
 def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:

@@ -221,3 +221,53 @@ def test_montecarlo_flags_model_mismatch_bias(robot, example):
     assert flags, "the linear method on full-model data is biased (README, Monte-Carlo)"
     assert all("model mismatch of the linear method" in m for m in flags.values())
     assert "BIAS" in res.table()
+
+
+# ------------------------------------------------------------------ gross errors
+
+
+@pytest.fixture(scope="module")
+def example_data(data_dir):
+    robot = jaxcal.load_robot()
+    return robot, jaxcal.read_dataset(data_dir / EXAMPLE, robot)
+
+
+@pytest.mark.parametrize("n_gross", [1, 3])
+def test_gross_errors_are_named_over_seeds(example_data, n_gross):
+    """A 5 mm error (250 σ) in 1 or 3 rows at random positions, 10 seeds each: exactly
+    those rows are named and excluded, and the estimates are those of clean data
+    (within 1 std: dropping 1-3 of 48 rows moves them by far less)."""
+    robot, data = example_data
+    clean = jaxcal.identify(robot, data, "nonlinear")
+    assert clean.gross_rows == ()
+    d0 = np.asarray(data.deflection)
+    for seed in range(10):
+        rng = np.random.default_rng(100 * n_gross + seed)
+        rows = rng.choice(len(data), n_gross, replace=False)
+        d = d0.copy()
+        d[rows, rng.integers(0, 3, n_gross)] += rng.choice([-1.0, 1.0], n_gross) * 5e-3
+        with pytest.warns(UserWarning, match="likely a gross error"):
+            res = jaxcal.identify(robot, data.with_deflection(jnp.asarray(d)), "nonlinear")
+        assert sorted(res.gross_rows) == sorted(int(r) for r in rows), seed
+        assert res.gross_excluded and bool(res.converged)
+        assert res.dof == clean.dof - 3 * n_gross
+        z = np.abs(np.asarray(res.estimate) - np.asarray(clean.estimate)) / np.asarray(clean.std)
+        assert z.max() < 1.0, (seed, z)
+        assert all(s > 100 for _, s in res.gross_errors())
+
+
+def test_gross_error_cli_says_so(example, tmp_path, capsys):
+    lines = example_lines(example.parent)
+    head = lines[0].split(",")
+    cells = lines[20].split(",")
+    cells[head.index("dy_mm")] = repr(float(cells[head.index("dy_mm")]) + 5.0)
+    lines[20] = ",".join(cells)
+    bad = write(tmp_path / "g.csv", lines)
+    rc, out, err = run(["identify", bad, "--json"], capsys)
+    assert rc == 0
+    assert "row 20: 2" in err and "likely a gross error; estimates below exclude it" in err
+    d = json.loads(out)
+    assert [g["row"] for g in d["gross_errors"]] == [20] and d["gross_errors_excluded"]
+    assert 20 not in d["outliers"] and d["outliers"] == []
+    rc, _, err = run(["identify", bad, "--keep-outliers"], capsys)
+    assert "row 20" in err and "the estimates include it and are not to be trusted" in err
