@@ -53,23 +53,7 @@ def run(args: argparse.Namespace) -> int:
     data = read_dataset(args.data, robot, require_deflection=False, ignore_deflection=True)
     noise = None if args.noise_mm is None else args.noise_mm * 1e-3
     out = simulate(robot, data, noise_std=noise, key=args.seed)
-    if args.output:
-        # Written whole to a temporary file first: a failure never leaves half a file.
-        import os
-        import tempfile
-        from pathlib import Path
-
-        folder = Path(args.output).parent
-        fd, tmp = tempfile.mkstemp(dir=folder if str(folder) else ".", suffix=".tmp")
-        os.close(fd)
-        try:
-            write_dataset(tmp, out, sigma=noise is not None)
-            os.replace(tmp, args.output)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    else:
-        write_dataset(sys.stdout, out, sigma=noise is not None)
+    write_dataset(args.output or sys.stdout, out, sigma=noise is not None)
     if args.output:
         print(f"wrote {len(out)} rows to {args.output}", file=sys.stderr)
     return 0

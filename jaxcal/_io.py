@@ -10,6 +10,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import math
+import os
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
@@ -20,7 +23,7 @@ from jaxtyping import Array, Float
 
 from ._robot import Robot
 
-__all__ = ["Dataset", "read_dataset", "write_dataset", "DataError"]
+__all__ = ["Dataset", "read_dataset", "write_dataset", "atomic_text_file", "DataError"]
 
 Q_COLS = tuple(f"q{i}_deg" for i in range(1, 7))
 F_COLS = ("fx_N", "fy_N", "fz_N")
@@ -260,11 +263,27 @@ def read_dataset(
     )
 
 
+@contextlib.contextmanager
+def atomic_text_file(path: str | Path) -> Iterator[TextIO]:
+    """Open `path` for writing text through a temporary file in the same directory,
+    renamed into place on success: a failure never leaves a half-written file, nor
+    clobbers an existing one."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            yield fh
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
 def write_dataset(
     path: str | Path | TextIO, data: Dataset, *, deflection: bool = True, sigma: bool = False
 ) -> None:
-    """Write a data set as a data-format CSV (deg, N, N·m, mm) to a path or an open
-    text stream.
+    """Write a data set as a data-format CSV (deg, N, N·m, mm) to a path (atomically:
+    see `atomic_text_file`) or an open text stream.
 
     Deflection columns are written when `deflection` is true and the set has them (a
     design without deflections can be fed to `jaxcal simulate`); `sigma_mm` when `sigma`
@@ -284,7 +303,7 @@ def write_dataset(
     s = np.asarray(data.sigma) * 1e3
     with contextlib.ExitStack() as stack:
         if isinstance(path, str | Path):
-            fh: TextIO = stack.enter_context(Path(path).open("w", newline=""))
+            fh: TextIO = stack.enter_context(atomic_text_file(path))
         else:
             fh = path
         w = csv.writer(fh, lineterminator="\n")

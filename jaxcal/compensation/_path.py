@@ -8,8 +8,6 @@ A path is a data-format CSV without deflection columns: per row the programmed a
 from __future__ import annotations
 
 import csv
-import os
-import tempfile
 from pathlib import Path
 
 import equinox as eqx
@@ -19,7 +17,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._calibration import Calibration
-from .._io import F_COLS, M_COLS, Q_COLS, Dataset, read_dataset
+from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_text_file, read_dataset
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
@@ -186,25 +184,18 @@ def write_commands(out: str | Path, comp: Compensation) -> int:
     rot = np.linalg.norm(np.asarray(r.residual_rotation), axis=1) * 1e6
     cond = np.asarray(r.cond)
     std = np.asarray(r.res_std) * 1e3
-    out = Path(out)
-    fd, tmp = tempfile.mkstemp(dir=out.parent if str(out.parent) else ".", suffix=".tmp")
     n = 0
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(header)
-            for i in np.flatnonzero(ok):
-                row = [f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in np.r_[f[i], m[i]]]
-                row += [f"{x:.9f}" for x in qc[i]] + [f"{x:.6f}" for x in d[i]]
-                row += [f"{res[i]:.3e}", f"{rot[i]:.3e}", f"{cond[i]:.4g}"]
-                if has_std:
-                    row.append(f"{std[i]:.6f}")
-                if p.ids:
-                    row.append(p.ids[i])
-                w.writerow(row)
-                n += 1
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_text_file(out) as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(header)
+        for i in np.flatnonzero(ok):
+            row = [f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in np.r_[f[i], m[i]]]
+            row += [f"{x:.9f}" for x in qc[i]] + [f"{x:.6f}" for x in d[i]]
+            row += [f"{res[i]:.3e}", f"{rot[i]:.3e}", f"{cond[i]:.4g}"]
+            if has_std:
+                row.append(f"{std[i]:.6f}")
+            if p.ids:
+                row.append(p.ids[i])
+            w.writerow(row)
+            n += 1
     return n
