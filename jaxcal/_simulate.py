@@ -42,9 +42,13 @@ def model_deflections(
         return dp, ok
     bad = np.flatnonzero(~np.asarray(ok))
     if bad.size:
+        rows = ", ".join(str(i + 1) for i in bad[:20])
+        more = f" and {bad.size - 20} more" if bad.size > 20 else ""
+        every = (
+            " (every row: is the robot file or the load far off?)" if bad.size == len(ok) else ""
+        )
         raise DeflectionError(
-            "static equilibrium did not converge (or is not stable) for row(s) "
-            f"{', '.join(str(i + 1) for i in bad)}"
+            f"static equilibrium did not converge (or is not stable) for row(s) {rows}{more}{every}"
         )
     return dp
 

@@ -88,6 +88,18 @@ def test_equilibrium_failure_is_a_message_and_nothing_is_written(example, tmp_pa
     assert not out.exists() and not list(tmp_path.glob("*.tmp"))
 
 
+def test_failure_does_not_clobber_an_existing_output(example, tmp_path, capsys):
+    d = jaxcal.robot_to_dict(jaxcal.load_robot())
+    d["joint_compliance_urad_per_Nm"] = [c * 1000 for c in d["joint_compliance_urad_per_Nm"]]
+    (tmp_path / "soft.json").write_text(json.dumps(d))
+    out = tmp_path / "out.csv"
+    out.write_text("previous results\n")
+    rc, _, err = run(["simulate", example, "--robot", tmp_path / "soft.json", "-o", out], capsys)
+    assert rc == 2 and "every row" in err and "and 28 more" in err
+    assert out.read_text() == "previous results\n"
+    assert not list(tmp_path.glob(".out.csv.*"))
+
+
 def test_non_converged_identify_exits_nonzero(example, tmp_path, capsys):
     lines = example_lines(example.parent)
     head = lines[0].split(",")
