@@ -139,6 +139,9 @@ def _split(out):
     return out, jnp.array(True)
 
 
+_NO_MESH = jax.sharding.AbstractMesh((), ())
+
+
 def nonlinear_fit(
     predict: Callable[[Float[Array, " P"]], Float[Array, "n 3"] | tuple[Array, Array]],
     p0: Float[Array, " P"],
@@ -252,9 +255,13 @@ def nonlinear_fit(
     # Householder QR in plain jnp (`SmallQR`), not lineax's LAPACK QR: fits run vmapped
     # over Monte-Carlo trials, where batched LAPACK kernels can deadlock (see `_dense`).
     solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())  # pyright: ignore[reportCallIssue]
-    sol = optx.least_squares(
-        fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False, options={"jac": _JAC}
-    )
+    # optimistix traces the residual twice (shape inference under `eval_shape`, which
+    # runs in an empty abstract-mesh context, and the solve itself). Under one context
+    # the model's jitted inner pieces (`batch_roots`) are traced once and reused.
+    with jax.sharding.use_abstract_mesh(_NO_MESH):
+        sol = optx.least_squares(
+            fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False, options={"jac": _JAC}
+        )
     y = sol.value
     p = params(y)
     # The Gauss–Newton state holds the evaluation at the returned (last accepted) point.
