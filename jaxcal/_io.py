@@ -23,7 +23,14 @@ from jaxtyping import Array, Float
 
 from ._robot import Robot
 
-__all__ = ["Dataset", "read_dataset", "write_dataset", "atomic_text_file", "DataError"]
+__all__ = [
+    "Dataset",
+    "read_dataset",
+    "write_dataset",
+    "atomic_text_file",
+    "input_cells",
+    "DataError",
+]
 
 Q_COLS = tuple(f"q{i}_deg" for i in range(1, 7))
 F_COLS = ("fx_N", "fy_N", "fz_N")
@@ -279,6 +286,16 @@ def atomic_text_file(path: str | Path) -> Iterator[TextIO]:
             os.unlink(tmp)
 
 
+def input_cells(data: Dataset) -> tuple[list[str], list[list[str]]]:
+    """The input columns of a data set as a file holds them: the header
+    (`q1_deg … mz_Nm`) and, per row, the angles (deg, 6 decimals) and the load (N, N·m,
+    3 decimals) as text. Every file jaxcal writes starts its rows with these."""
+    q = np.rad2deg(np.asarray(data.q))
+    fm = np.concatenate([np.asarray(data.force), np.asarray(data.moment)], axis=1)
+    rows = [[f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in fm[i]] for i in range(len(data))]
+    return list(Q_COLS + F_COLS + M_COLS), rows
+
+
 def write_dataset(
     path: str | Path | TextIO, data: Dataset, *, deflection: bool = True, sigma: bool = False
 ) -> None:
@@ -289,7 +306,7 @@ def write_dataset(
     design without deflections can be fed to `jaxcal simulate`); `sigma_mm` when `sigma`
     is true; `id` when the set has labels.
     """
-    header = list(Q_COLS + F_COLS + M_COLS)
+    header, cells = input_cells(data)
     with_d = deflection and data.deflection is not None
     if with_d:
         header += list(D_COLS)
@@ -297,8 +314,6 @@ def write_dataset(
         header.append("sigma_mm")
     if data.ids:
         header.append("id")
-    q = np.rad2deg(np.asarray(data.q))
-    f, m = np.asarray(data.force), np.asarray(data.moment)
     d = np.asarray(data.deflection) * 1e3 if with_d else None
     s = np.asarray(data.sigma) * 1e3
     with contextlib.ExitStack() as stack:
@@ -309,9 +324,7 @@ def write_dataset(
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for i in range(len(data)):
-            row = (
-                [f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in f[i]] + [f"{x:.3f}" for x in m[i]]
-            )
+            row = list(cells[i])
             if d is not None:
                 row += [f"{x:.6f}" for x in d[i]]
             if sigma:

@@ -17,7 +17,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._calibration import Calibration
-from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_text_file, read_dataset
+from .._io import Dataset, atomic_text_file, input_cells, read_dataset
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
@@ -170,13 +170,12 @@ def write_commands(out: str | Path, comp: Compensation) -> int:
     p = comp.path
     ok = comp.ok
     has_std = bool(np.all(np.isfinite(np.asarray(comp.rows.res_std)[ok]))) and ok.any()
-    header = list(Q_COLS + F_COLS + M_COLS) + list(COMMAND_COLUMNS)
+    header, cells = input_cells(p)
+    header += list(COMMAND_COLUMNS)
     if has_std:
         header.append("res_std_mm")
     if p.ids:
         header.append("id")
-    q = np.rad2deg(np.asarray(p.q))
-    f, m = np.asarray(p.force), np.asarray(p.moment)
     r = comp.rows
     qc = np.rad2deg(np.asarray(r.qc))
     d = np.asarray(r.deflection) * 1e3
@@ -189,8 +188,7 @@ def write_commands(out: str | Path, comp: Compensation) -> int:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for i in np.flatnonzero(ok):
-            row = [f"{x:.6f}" for x in q[i]] + [f"{x:.3f}" for x in np.r_[f[i], m[i]]]
-            row += [f"{x:.9f}" for x in qc[i]] + [f"{x:.6f}" for x in d[i]]
+            row = cells[i] + [f"{x:.9f}" for x in qc[i]] + [f"{x:.6f}" for x in d[i]]
             row += [f"{res[i]:.3e}", f"{rot[i]:.3e}", f"{cond[i]:.4g}"]
             if has_std:
                 row.append(f"{std[i]:.6f}")
