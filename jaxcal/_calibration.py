@@ -27,7 +27,14 @@ from ._ident_result import IdentificationResult
 from ._parameters import get_parameters, set_parameters
 from ._robot import Robot, load_robot_dict, robot_from_dict, robot_to_dict
 
-__all__ = ["Calibration", "calibrated_robot", "calibration_block", "read_calibration", "save_robot"]
+__all__ = [
+    "Calibration",
+    "calibrated_robot",
+    "calibration_block",
+    "load_calibrated",
+    "read_calibration",
+    "save_robot",
+]
 
 
 class Calibration(eqx.Module):
@@ -100,7 +107,9 @@ def calibration_block(result: IdentificationResult, data_file: str | Path | None
         "std": np.asarray(result.std, float).tolist(),
         "covariance": np.asarray(result.covariance, float).tolist(),
         "fixed": list(result.fixed),
-        "chi2": float(np.sum(z**2)),
+        # Over the rows the fit kept (gross errors excluded): χ²_red · dof.
+        "chi2": float(result.chi2_red) * int(result.dof),
+        "excluded_rows": [int(i) + 1 for i in result.gross_rows] if result.gross_excluded else [],
         "chi2_red": float(result.chi2_red),
         "dof": int(result.dof),
         "converged": bool(result.converged),
@@ -174,17 +183,25 @@ def _calibration_from_dict(c: Any, robot: Robot) -> Calibration:
     )
 
 
-def read_calibration(robot: str | Path | Robot = "fanuc_m900ib700") -> Calibration | None:
-    """The `"calibration"` block of a robot file, or `None` when it has none (presets,
-    robot files never calibrated, a `Robot` object). Raises `ValueError` naming the key
-    of a malformed block."""
+def load_calibrated(
+    robot: str | Path | Robot = "fanuc_m900ib700",
+) -> tuple[Robot, Calibration | None]:
+    """A robot and its `"calibration"` block (`None` when it has none: presets, robot
+    files never calibrated, a `Robot` object), from one reading of the file. Raises
+    `ValueError` naming the key of a malformed file or block."""
     if isinstance(robot, Robot):
-        return None
+        return robot, None
     d, source = load_robot_dict(robot)
-    if "calibration" not in d or d["calibration"] is None:
-        return None
     r = robot_from_dict(d, source=source)
+    if d.get("calibration") is None:
+        return r, None
     try:
-        return _calibration_from_dict(d["calibration"], r)
+        return r, _calibration_from_dict(d["calibration"], r)
     except ValueError as e:
         raise ValueError(f"{source}: robot file: {e}") from None
+
+
+def read_calibration(robot: str | Path | Robot = "fanuc_m900ib700") -> Calibration | None:
+    """The `"calibration"` block of a robot file, or `None` when it has none (see
+    `load_calibrated`, which returns the robot too)."""
+    return load_calibrated(robot)[1]

@@ -46,16 +46,14 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ._calibration import read_calibration
-    from ._robot import load_robot
+    from ._calibration import load_calibrated
     from .compensation import compensate, read_path, write_commands
 
     check_output_path(args.output, "-o")
     check_output_path(args.plot, "--plot")
     if not args.max_cond > 1:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
-    robot = load_robot(args.robot)
-    calibration = read_calibration(args.robot)
+    robot, calibration = load_calibrated(args.robot)
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)
     comp = compensate(robot, path, calibration, max_cond=args.max_cond)

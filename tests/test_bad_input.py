@@ -275,8 +275,13 @@ def test_gross_error_cli_says_so(example, tmp_path, capsys):
     cells[head.index("dy_mm")] = repr(float(cells[head.index("dy_mm")]) + 5.0)
     lines[20] = ",".join(cells)
     bad = write(tmp_path / "g.csv", lines)
-    rc, out, err = run(["identify", bad, "--json"], capsys)
+    cal = tmp_path / "cal.json"
+    rc, out, err = run(["identify", bad, "--json", "--save-robot", cal], capsys)
     assert rc == 0
+    block = json.loads(cal.read_text())["calibration"]
+    assert block["excluded_rows"] == [20]
+    assert block["chi2"] == pytest.approx(block["chi2_red"] * block["dof"], rel=1e-12)
+    assert block["chi2_red"] < 2  # the excluded row's 249 σ is not in it
     assert "row 20: 2" in err and "likely a gross error; estimates below exclude it" in err
     d = json.loads(out)
     assert [g["row"] for g in d["gross_errors"]] == [20] and d["gross_errors_excluded"]

@@ -279,6 +279,9 @@ def test_save_robot_round_trip_and_fixed(robot, data_dir, tmp_path, capsys):
     full = c.full_covariance(loaded)
     assert full.shape == (8, 8) and float(full[7, 7]) == 0.0
     assert jaxcal.read_calibration("fanuc_m900ib700") is None
+    block = json.loads(cal.read_text())["calibration"]
+    assert block["chi2"] == pytest.approx(block["chi2_red"] * block["dof"], rel=1e-12)
+    assert block["excluded_rows"] == []
 
 
 def test_malformed_calibration_block_is_named(tmp_path, data_dir):

@@ -197,7 +197,7 @@ def compensate_row(
 
     res_cov = jnp.full((3, 3), jnp.nan, dtype)
     if covariance is not None:
-        res_cov = _residual_covariance(robot, q, qc, force, moment, x_u, x_l, covariance)
+        res_cov = _residual_covariance(robot, q, qc, force, moment, xu0, eq.x, covariance)
     res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
 
     # One reason per row, the most basic cause last (it wins).
@@ -208,18 +208,22 @@ def compensate_row(
     return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
 
 
-def _residual_covariance(robot, q, qc, force, moment, x_u, x_l, covariance):
+def _residual_covariance(robot, q, qc, force, moment, x_u, x_c, covariance):
     """Covariance (m²) of the tool-point residual that parameter errors of covariance
     `covariance` leave at fixed `qc`: `G Σ Gᵀ`, with `G` the autodiff Jacobian of
-    `pT(qc, F; p) − pT(q, 0; p)` (both equilibria move with `p`)."""
+    `pT(qc, F; p) − pT(q, 0; p)` (both equilibria move with `p`). `x_u` and `x_c` are
+    the roots already solved at `q` (gravity only) and at `qc` (loaded, verified):
+    the implicit steps differentiate them without solving again."""
     p0 = get_parameters(robot)
     zero = jnp.zeros_like(force)
+    ok = jnp.array(True)
+    x_u, x_c = jax.lax.stop_gradient((x_u, x_c))
 
     def r(p):
         rb = set_parameters(robot, p)
-        p_c, _, _ = _loaded_pose(rb, qc, force, moment, x_l)
-        xu, _ = implicit_step(rb, q, zero, None, x_u, jnp.array(True))
-        return p_c - tool_pose(rb, q, xu)[0]
+        xc, _ = implicit_step(rb, qc, force, moment, x_c, ok, symmetric=moment is None)
+        xu, _ = implicit_step(rb, q, zero, None, x_u, ok)
+        return tool_pose(rb, qc, xc)[0] - tool_pose(rb, q, xu)[0]
 
     G = jax.jacfwd(r)(p0)
     C = G @ covariance @ G.T
