@@ -126,8 +126,12 @@ from ._parameters import (
     set_parameters as set_parameters,
 )
 from ._plans import (
+    PAPER_TABLE5_DEG as PAPER_TABLE5_DEG,
     feasible_q3_range as feasible_q3_range,
+    jaxcal_to_paper as jaxcal_to_paper,
+    paper_q2 as paper_q2,
     paper_table5_plan as paper_table5_plan,
+    paper_to_jaxcal as paper_to_jaxcal,
     random_designs as random_designs,
     structured_design as structured_design,
 )

@@ -170,6 +170,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "uses_cache", True) and not getattr(args, "no_cache", False):
         _enable_cache()
 
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        # A user of the command line reads the message, not our source location.
+        print(f"jaxcal {args.command}: warning: {message}", file=sys.stderr)
+
+    shown, warnings.showwarning = warnings.showwarning, show
     try:
         return int(args.func(args) or 0)
     except (DataError, ValueError, DeflectionError) as e:
@@ -182,6 +189,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
 
 
 def _enable_cache() -> None:

@@ -1,11 +1,11 @@
 """`jaxcal demo`: the main job end to end on the built-in robot, in a few seconds.
 
-A calibration experiment is built from the paper's Table 5 configurations (q2 shifted by
-−30° into this robot's q2 range), each with the full vertical load, half of it and a
-horizontal load across the arm (so that k1 is identifiable); it is simulated with the
-full equilibrium model of a "true" robot whose parameters differ from the preset, with
-the preset's tracker noise, and identified with the nonlinear method started at the
-preset. The table puts the true values beside the estimates.
+A calibration experiment is built from the paper's Table 5 configurations (converted to
+this robot's convention, q2 = 90° − the paper's, by `paper_to_jaxcal`), each with the
+full vertical load, half of it and a horizontal load across the arm (so that k1 is
+identifiable); it is simulated with the full equilibrium model of a "true" robot whose
+parameters differ from the preset, with the preset's tracker noise, and identified with
+the nonlinear method started at the preset. The table puts the true values beside the estimates.
 """
 
 from __future__ import annotations
@@ -20,15 +20,15 @@ from ._cli import print_json, seed
 
 
 def demo_experiment(robot, horizontal_fraction: float = 0.45):
-    """Table 5 with q2 − 30°, three loads each: −max_load ẑ, half of it, and a horizontal
-    force `horizontal_fraction·max_load` across the arm (perpendicular to the vertical
-    plane of the arm). Returns a `Dataset` without deflections."""
+    """The paper's Table 5 in jaxcal's angles (`paper_table5_plan`), three loads each:
+    −max_load ẑ, half of it, and a horizontal force `horizontal_fraction·max_load`
+    across the arm (perpendicular to the vertical plane of the arm). Returns a `Dataset`
+    without deflections."""
     from ._io import Dataset
-    from ._plans import PAPER_TABLE5_DEG
+    from ._plans import paper_table5_plan
     from ._robot import G
 
-    q = PAPER_TABLE5_DEG.copy()
-    q[:, 1] -= 30.0
+    q = np.rad2deg(paper_table5_plan())
     load = robot.experiment.max_load if robot.experiment is not None else 700 * G
     rows, forces = [], []
     for qi in q:
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(
         f"Demo: {len(data)} simulated measurements (12 configurations of paper Table 5, "
-        f"q2 - 30 deg; loads 700 kg, 350 kg, horizontal), noise {noise * 1e3:g} mm.\n"
+        f"q2 = 90 deg - paper q2; loads 700 kg, 350 kg, horizontal), noise {noise * 1e3:g} mm.\n"
     )
     print(res.table(truth=true))
     return 0

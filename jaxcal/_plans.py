@@ -1,6 +1,15 @@
 """Discrete designs: random feasible designs, the paper's structured plans (three q2
 values, q3 at the edges of its feasible interval, repeated measurements) and the paper's
-Table 5 plan; and the feasible q3 interval at a given q2."""
+Table 5 plan; the feasible q3 interval at a given q2; and the one conversion between the
+paper's joint angles and jaxcal's.
+
+**Angle conventions.** The paper measures q2 from the *horizontal* (its eq. 12: the lower
+arm's end is at `(l2 cos q2, l2 sin q2)` in the arm's vertical plane); jaxcal's robot
+(`spec/robot.md`) measures q2 as the forward tilt of the lower arm from the *vertical*
+(`u2 = (sin φ2, 0, cos φ2)`). Hence **jaxcal q2 = 90° − paper q2**: the paper's box
+[0°, 120°] maps onto the canonical robot's [−30°, 90°], reversed. q3 is the upper arm's
+angle above the horizontal in both; q1 and the wrist angles are taken as they are.
+"""
 
 from __future__ import annotations
 
@@ -20,10 +29,42 @@ __all__ = [
     "random_designs",
     "structured_design",
     "paper_table5_plan",
+    "paper_to_jaxcal",
+    "jaxcal_to_paper",
+    "paper_q2",
 ]
 
-#: The paper's Table 5 (deg): 12 configurations for the FANUC M-900iB/700, q2 in the
-#: paper's box [0°, 120°] (subtract 30° for the canonical robot's [−30°, 90°]).
+#: jaxcal q2 = PAPER_Q2_MIRROR_DEG − paper q2 (deg); the map is its own inverse.
+PAPER_Q2_MIRROR_DEG = 90.0
+
+
+def paper_q2(q2, *, degrees: bool = True):
+    """The q2 of the other convention: `90° − q2` (paper ↔ jaxcal; its own inverse).
+    Works elementwise on scalars and arrays (a matplotlib `secondary_xaxis` can take it
+    as both directions). Radians with `degrees=False`."""
+    mirror = PAPER_Q2_MIRROR_DEG if degrees else math.radians(PAPER_Q2_MIRROR_DEG)
+    return mirror - (float(q2) if np.isscalar(q2) else np.asarray(q2, float))
+
+
+def paper_to_jaxcal(q, *, degrees: bool = True) -> np.ndarray:
+    """Joint angles `(..., 6)` in the paper's convention to jaxcal's (q2 → 90° − q2,
+    everything else unchanged); degrees unless `degrees=False`."""
+    q = np.array(q, float)
+    if q.shape[-1:] != (6,):
+        raise ValueError(f"q must have shape (..., 6), got {q.shape}")
+    q[..., 1] = paper_q2(q[..., 1], degrees=degrees)
+    return q
+
+
+def jaxcal_to_paper(q, *, degrees: bool = True) -> np.ndarray:
+    """Joint angles `(..., 6)` in jaxcal's convention to the paper's (the inverse of
+    `paper_to_jaxcal`, which is the same map)."""
+    return paper_to_jaxcal(q, degrees=degrees)
+
+
+#: The paper's Table 5 (deg), in the *paper's* convention: 12 configurations for the
+#: FANUC M-900iB/700, q2 ∈ {0°, 35°, 120°} of its box [0°, 120°] (`paper_to_jaxcal`
+#: converts; `paper_table5_plan` returns it in jaxcal's convention).
 PAPER_TABLE5_DEG = np.array(
     [
         [0, 0, -30, -45, 30, 135],
@@ -143,13 +184,15 @@ def structured_design(
     return np.asarray(rows)
 
 
-def paper_table5_plan(shift_deg: float = -30.0, middle_q2_deg: float | None = None) -> np.ndarray:
-    """The paper's Table 5 plan (rad, (12, 6)) with q2 shifted by `shift_deg` (the
-    canonical robot's box is the paper's shifted by −30°); optionally the middle q2
-    value (35° in the paper, before the shift) replaced by `middle_q2_deg` (after)."""
-    q = PAPER_TABLE5_DEG.copy()
-    mid = q[:, 1] == 35
-    q[:, 1] += shift_deg
+def paper_table5_plan(middle_q2_deg: float | None = None) -> np.ndarray:
+    """The paper's Table 5 plan in jaxcal's convention (rad, `(12, 6)`): q2 ∈ {90°, 55°,
+    −30°} (the paper's 0°, 35°, 120°). Optionally the middle q2 (the paper's 35°) replaced
+    by `middle_q2_deg`, given in jaxcal's convention.
+
+    On the canonical robot its last two rows (the paper's q2 = 120°, q3 = +30°; ours
+    q2 = −30°) lie 0.16 m inside the 1 m minimum wrist radius: the paper's robot and set-up
+    admit them, ours does not (`constraint_values` names the constraint and margin)."""
+    q = paper_to_jaxcal(PAPER_TABLE5_DEG)
     if middle_q2_deg is not None:
-        q[mid, 1] = middle_q2_deg
+        q[PAPER_TABLE5_DEG[:, 1] == 35, 1] = middle_q2_deg
     return np.deg2rad(q)

@@ -16,7 +16,7 @@ from jaxcal._constraints import constraint_values, design_bounds, design_loads
 from jaxcal._criteria import design_criteria
 from jaxcal._design import DesignProblem, design_objective, optimise_design
 from jaxcal._observation import observation_linear
-from jaxcal._plans import feasible_q3_range, paper_table5_plan, random_designs, structured_design
+from jaxcal._plans import feasible_q3_range, random_designs, structured_design
 
 
 @pytest.fixture(scope="module")
@@ -186,11 +186,7 @@ def test_structured_and_paper_plans(robot):
     assert q.shape == (12, 6)
     assert np.asarray(constraint_values(robot, jnp.asarray(q))).max() <= 1e-9
     assert np.unique(np.round(np.rad2deg(q[:, 1]), 6)).tolist() == [-30.0, 5.0, 90.0]
-    plan = paper_table5_plan()
-    assert np.rad2deg(plan[:, 1]) == pytest.approx([-30] * 4 + [5] * 4 + [90] * 4)
-    # The paper's plan, shifted, violates our wrist radius at q2 = -30°, q3 = +30°.
-    viol = np.asarray(constraint_values(robot, jnp.asarray(plan)))[:, 2] > 0
-    assert viol.tolist() == [False, False, True, True] + [False] * 8
+    # The paper's plan in our convention: tests/test_paper_convention.py.
 
 
 @pytest.fixture(scope="module")
