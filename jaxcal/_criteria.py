@@ -67,6 +67,9 @@ __all__ = [
     "criteria_from_observation",
     "k1_identifiable",
     "select_parameters",
+    "resolve_parameters",
+    "default_relative",
+    "share_of_trace",
 ]
 
 CRITERIA: tuple[str, ...] = ("trace", "det", "weighted")
@@ -111,6 +114,7 @@ class DesignCriteria(eqx.Module):
         return tuple(self._null_names)
 
     _null_names: tuple[str, ...] = eqx.field(static=True, default=())
+    select: tuple[int, ...] | None = eqx.field(static=True, default=None)
 
 
 def _scaled_information(obs, nominal, sigma):
@@ -216,6 +220,7 @@ def criteria_from_observation(
         relative=relative,
         weights=weights,
         _null_names=null,
+        select=select,
     )
 
 
@@ -234,7 +239,7 @@ def design_criteria(
     force: Float[Array, "m 3"],
     moment: Float[Array, "m 3"] | None = None,
     *,
-    parameters: str = "physical",
+    parameters: str | tuple[str, ...] = "aggregated",
     relative: bool | None = None,
     weights: tuple[float, float] = (0.5, 0.5),
     sigma: Float[Array, " m"] | float | None = None,
@@ -249,8 +254,11 @@ def design_criteria(
 
     - `q`: `(m, 6)` joint angles, rad; `force`/`moment`: `(m, 3)` loads at the tool point
       (N, N·m, base frame).
-    - `parameters`: `"physical"` or `"aggregated"` (q2 groups = distinct q2 values).
-    - `relative`: scale-free criteria (default: True for physical, False for aggregated).
+    - `parameters`: `"aggregated"` (default; q2 groups = distinct q2 values),
+      `"physical"`, or an explicit list of physical parameters (`"k2,k3"`, see
+      `resolve_parameters`: the criterion over exactly those).
+    - `relative`: scale-free criteria (default: True for the physical set and for lists
+      holding Kc or s0, False for aggregated and lists of compliances).
     - `weights`: `(w1, w2)` of O3 = `w1·O1 + w2·O2`.
     - `sigma`: tracker noise per coordinate (m), per row or scalar; default the robot's
       `experiment.noise_std`.
@@ -258,18 +266,21 @@ def design_criteria(
       (`k1_identifiable`).
     - `focus`: criteria of these parameters only (`select_parameters`), e.g.
       `("k2", "k3")` for the parallelogram (paper section 5.2); default all.
-    - `model`: `"full"` (default for physical: the issue's definition of the set) or
-      `"linear"` (eq. 5; always for aggregated), see `design_observation`.
+    - `model`: `"full"` (default: the full equilibrium model linearised at the nominal
+      values) or `"linear"` (eq. 5), see `design_observation`.
     """
     if model is None:
-        model = "full" if parameters == "physical" else "linear"
+        model = "full"
+    parameters, listed = resolve_parameters(robot, parameters)
+    if listed is not None:
+        focus = listed
     _check_set(parameters, model)
     q = jnp.asarray(q)
     m = q.shape[0]
     if include_k1 is None:
         include_k1 = k1_identifiable(force, moment)
     if relative is None:
-        relative = parameters == "physical"
+        relative = default_relative(parameters, focus)
     if sigma is None:
         if robot.experiment is None:
             raise ValueError("sigma is required for a robot without an experiment section")
@@ -283,7 +294,7 @@ def design_criteria(
             robot, "aggregated", include_k1=include_k1, q2_values_deg=np.rad2deg(vals)
         )
         obs, nominal = _observe_jit(
-            robot, q, force, moment, "aggregated", idx, len(vals), include_k1, "linear"
+            robot, q, force, moment, "aggregated", idx, len(vals), include_k1, model
         )
     else:
         names = design_parameter_names(robot, "physical", include_k1=include_k1)
@@ -299,6 +310,56 @@ def design_criteria(
         weights=weights,
         select=select_parameters(names, focus),
     )
+
+
+def resolve_parameters(
+    robot: Robot, parameters: str | tuple[str, ...] | list[str]
+) -> tuple[str, tuple[str, ...] | None]:
+    """The parameter set and focus a user's `parameters` stands for: `"physical"` or
+    `"aggregated"` as they are (no focus); an explicit list of physical parameters
+    (`"k2,k3,k4"`, `("k2_urad_per_Nm", "Kc")`; names with or without units) is the
+    physical set with the criterion over exactly those (all parameters still estimated,
+    `focus`). Raises `ValueError` naming an unknown parameter."""
+    if isinstance(parameters, str):
+        if parameters in PARAMETER_SETS:
+            return parameters, None
+        items = [t.strip() for t in parameters.split(",") if t.strip()]
+    else:
+        items = [str(t).strip() for t in parameters]
+    known = [n.split("_")[0] for n in robot.parameter_names]
+    focus = []
+    for item in items:
+        base = item.split("_")[0]
+        if base not in known or (item != base and item not in robot.parameter_names):
+            raise ValueError(
+                f"parameters: {item!r} is neither a parameter set {PARAMETER_SETS} nor one "
+                f"of the robot's parameters {tuple(known)}"
+            )
+        if base not in focus:
+            focus.append(base)
+    if not focus:
+        raise ValueError(f"parameters must be one of {PARAMETER_SETS} or a list of names")
+    return "physical", tuple(focus)
+
+
+def share_of_trace(c: DesignCriteria) -> dict[str, float]:
+    """Host-side: each parameter's share of the trace criterion (its variance, relative
+    or absolute as the criterion, over the trace); parameters outside a `focus` get 0."""
+    var = np.asarray(c.relative_std if c.relative else c.std, float) ** 2
+    if c.select is not None:
+        keep = np.zeros(var.shape, bool)
+        keep[list(c.select)] = True
+        var = np.where(keep, var, 0.0)
+    total = var.sum()
+    return {n: float(v / total) for n, v in zip(c.names, var, strict=True)}
+
+
+def default_relative(parameters: str, focus: tuple[str, ...] | None) -> bool:
+    """Scale-free criteria where the parameters have different units: the physical set,
+    unless the focus holds compliances only (µrad/(N·m), like the aggregated set)."""
+    if parameters != "physical":
+        return False
+    return focus is None or not all(f.startswith("k") for f in focus)
 
 
 def select_parameters(

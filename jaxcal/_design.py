@@ -49,6 +49,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -59,10 +60,11 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._constraints import constraint_values, design_bounds, design_loads
-from ._criteria import DesignCriteria, design_parameter_names
+from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
+from ._design_bound import DesignBound, design_bound
 from ._design_problem import DesignProblem, _criteria, _log_value, design_objective
 from ._io import Dataset
-from ._plans import random_designs
+from ._plans import level_separation, random_designs
 from ._robot import Robot
 
 __all__ = [
@@ -78,6 +80,8 @@ __all__ = [
 _MARGIN = 2e-3
 _LENGTH = 0.01  # m: a 1 cm violation costs `weight` in the log-criterion
 _WEIGHTS = (1.0, 1e2, 1e4)
+_ANGLE = np.deg2rad(1.0)  # a 1° violation of the level gap costs `weight`
+_GAP_MARGIN = np.deg2rad(0.2)
 
 
 def _bounds(problem: DesignProblem, dtype):
@@ -111,12 +115,25 @@ def _encode(problem: DesignProblem, q: np.ndarray) -> tuple[Array, Array]:
     return jnp.asarray(u), jnp.asarray(v)
 
 
+def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
+    # Per pair of q2 groups: how far (rad) they are closer than the level gap (≤ 0: ok).
+    G = problem.n_groups
+    if problem.group_index is None or G < 2 or problem.level_gap_deg <= 0:
+        return jnp.zeros((0,), v.dtype)
+    lo, hi = _bounds(problem, v.dtype)
+    q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
+    i, j = np.triu_indices(G, 1)
+    return np.deg2rad(problem.level_gap_deg) - jnp.abs(q2[i] - q2[j])
+
+
 def _penalised(z, args):
     problem, weight = args
     q = _decode(problem, z)
     c = _criteria(problem, q)
     viol = constraint_values(problem.robot, q)[:, 1:] + _MARGIN
     pen = jnp.sum((jax.nn.relu(viol) / _LENGTH) ** 2)
+    gap = _gap_violation(problem, z[1]) + _GAP_MARGIN
+    pen = pen + jnp.sum((jax.nn.relu(gap) / _ANGLE) ** 2)
     return _log_value(problem, c) + weight * pen
 
 
@@ -137,6 +154,7 @@ def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: fl
             q,
             _criteria(problem, q),
             constraint_values(problem.robot, q),
+            jnp.max(_gap_violation(problem, sol.value[1]), initial=-jnp.inf),
         )
 
     return jax.vmap(one)(z0)
@@ -154,6 +172,9 @@ class Design:
     - `model`: the observation model the criterion was optimised on.
     - `random_best`: with `pool`, the best criterion of the random designs evaluated
       (`value / random_best` is the gain over random designs); else `None`.
+    - `repeats`: each configuration of `q` is measured this many times (the criteria
+      count every repetition; `dataset` lists them all).
+    - `bound`: the approximate-design bound (`design_bound`), `efficiency` = bound/value.
     """
 
     q: np.ndarray
@@ -168,17 +189,31 @@ class Design:
     max_violation: float = 0.0
     model: str = "full"
     random_best: float | None = None
+    repeats: int = 1
+    bound: DesignBound | None = None
+
+    @property
+    def efficiency(self) -> float | None:
+        """`bound / value` against the approximate-design bound (`None` without one)."""
+        return None if self.bound is None else self.bound.efficiency(self.value)
+
+    def shares(self) -> dict[str, float]:
+        """Each parameter's share of the trace of the covariance (`share_of_trace`)."""
+        return share_of_trace(self.criteria)
 
     def dataset(self, robot: Robot) -> Dataset:
         """The design as a `Dataset` without deflections (write it with
         `write_dataset(..., deflection=False)` and feed it to `jaxcal simulate`)."""
         assert robot.experiment is not None
-        m = len(self.q)
+        m, r = len(self.q), self.repeats
+        ids = tuple(
+            f"c{i + 1}" + (f"r{k + 1}" if r > 1 else "") for i in range(m) for k in range(r)
+        )
         return Dataset.from_arrays(
-            np.rad2deg(self.q),
-            self.force,
+            np.repeat(np.rad2deg(self.q), r, axis=0),
+            np.repeat(self.force, r, axis=0),
             sigma_mm=robot.experiment.noise_std * 1e3,
-            ids=tuple(f"c{i + 1}" for i in range(m)),
+            ids=ids,
             source="jaxcal design",
         )
 
@@ -205,7 +240,7 @@ def optimise_design(
     m: int = 12,
     *,
     criterion: str = "trace",
-    parameters: str = "physical",
+    parameters: str | tuple[str, ...] = "aggregated",
     loads: str = "vertical",
     groups: tuple[int, ...] | None = None,
     relative: bool | None = None,
@@ -219,6 +254,9 @@ def optimise_design(
     pool: int = 0,
     progress: bool = False,
     model: str | None = None,
+    repeats: int = 1,
+    level_gap_deg: float = 20.0,
+    bound_pool: int = 2000,
 ) -> Design:
     """Optimise a design of `m` configurations (see module doc and `DesignProblem`).
 
@@ -234,26 +272,49 @@ def optimise_design(
       200 random feasible designs"). Otherwise the starts are `starts` random designs.
     - `max_steps`, `rtol`: BFGS budget and tolerance per penalty round.
     - `progress`: print the best feasible value after each round to stderr.
-    - `model`: the observation model the criterion is optimised on (default: `"full"`
-      for the physical set, the issue's definition; `"linear"` for aggregated).
-      Cost on 2 cores, 12 configurations: the full model's q-gradient is a second
-      derivative through the equilibrium (implicit function theorem), ~100x the
-      linear model's per step and ~30 s instead of ~5 s to compile; the default
-      8 starts x 150 steps take about a minute (see `benchmarks/README.md`).
+    - `model`: the observation model the criterion is optimised on (default `"full"`;
+      `"linear"`: eq. 5, compensator folded into joint 2). Cost on 2 cores, 12
+      configurations: the full model's q-gradient is a second derivative through the
+      equilibrium (implicit function theorem), ~100x the linear model's per step and
+      ~30 s instead of ~5 s to compile (see `benchmarks/README.md`).
+    - `parameters`: `"aggregated"` (default), `"physical"`, or an explicit list of
+      physical parameters (`"k2,k3,k4"`: the criterion over exactly those, all still
+      estimated; see `resolve_parameters`).
+    - `repeats`: measure each of the `m` distinct configurations `repeats` times.
+    - `level_gap_deg`: with q2 groups, their q2 values at least this far apart (deg;
+      default 20), so that the compensator can be recovered from the aggregated
+      compliances; the bound and the random designs obey it too.
+    - `bound_pool`: candidates of the approximate-design bound (`design_bound`, with
+      the design's own configurations added); 0 skips it.
 
     Returns the best feasible `Design` over the starts (`feasible=False` if none is).
     """
     _check_x64(robot)
     t0 = time.perf_counter()
+    parameters, listed = resolve_parameters(robot, parameters)
+    if listed is not None:
+        focus = listed
     problem = DesignProblem(
-        robot, m, loads, parameters, criterion, groups, relative, weights, None, focus, model
+        robot,
+        m,
+        loads,
+        parameters,
+        criterion,
+        groups,
+        relative,
+        weights,
+        None,
+        focus,
+        model,
+        repeats,
+        level_gap_deg if groups is not None or parameters == "aggregated" else 0.0,
     )
     g = problem.group_index
     random_best = None
     if init is not None:
         q0 = np.asarray(init, float).reshape(-1, m, 6)
     elif pool > 0:
-        cand = random_designs(robot, pool, m, seed, groups=g)
+        cand = random_designs(robot, pool, m, seed, groups=g, level_gap_deg=problem.level_gap_deg)
         vals = np.asarray(_pool_values(problem, jnp.asarray(cand)))
         random_best = float(np.nanmin(vals))
         q0 = cand[np.argsort(np.where(np.isfinite(vals), vals, np.inf))[:starts]]
@@ -264,14 +325,22 @@ def optimise_design(
                 file=sys.stderr,
             )
     else:
-        q0 = random_designs(robot, starts, m, seed, groups=g, margin=_MARGIN)
+        q0 = random_designs(
+            robot,
+            starts,
+            m,
+            seed,
+            groups=g,
+            margin=_MARGIN,
+            level_gap_deg=problem.level_gap_deg + np.rad2deg(_GAP_MARGIN),
+        )
     z = _encode(problem, q0)
     history = []
     best, crits, q = 0, None, None
     for r, w in enumerate(_WEIGHTS):
-        z, steps, q, crits, cv = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
+        z, steps, q, crits, cv, gv = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
         val, cv = np.asarray(crits.value(criterion)), np.asarray(cv)
-        viol = cv.max(axis=(1, 2))
+        viol = np.maximum(cv.max(axis=(1, 2)), np.asarray(gv))
         feas = (viol <= 1e-9) & np.isfinite(val)
         pick = np.where(feas, val, np.inf)
         best = int(np.argmin(pick)) if feas.any() else int(np.argmin(viol))
@@ -296,6 +365,21 @@ def optimise_design(
     crit = dataclasses.replace(crit, names=names)
     # Checked on the returned angles, not taken from the optimiser's bookkeeping.
     cvb = np.asarray(_constraints_jit(robot, jnp.asarray(qb)))
+    if g is not None and problem.n_groups > 1:
+        q2g = [qb[np.asarray(g) == k, 1].mean() for k in range(problem.n_groups)]
+        gap_viol = np.deg2rad(problem.level_gap_deg) - float(level_separation(q2g))
+        cvb = np.append(cvb.ravel(), gap_viol)
+    bound = None
+    if bound_pool > 0 and not (criterion == "det" and problem.focus is not None):
+        bound = design_bound(problem, n=bound_pool, seed=seed, include=qb)
+        if progress:
+            print(
+                f"design: approximate-design bound {bound.value:.6g} over {bound.pool_size} "
+                f"candidates, efficiency {bound.efficiency(float(crit.value(criterion))):.3f} "
+                f"({time.perf_counter() - t0:.1f} s)",
+                file=sys.stderr,
+            )
+    _warn_dominant(crit, criterion, parameters)
     return Design(
         q=qb,
         force=force,
@@ -309,4 +393,23 @@ def optimise_design(
         max_violation=float(cvb.max()),
         model=problem.obs_model,
         random_best=random_best,
+        repeats=repeats,
+        bound=bound,
     )
+
+
+def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
+    # One parameter holding most of the trace: the design spends itself on a parameter
+    # it cannot determine (typically Kc in the physical set).
+    if criterion == "det" or not bool(c.full_rank):
+        return
+    if parameters != "physical":
+        return
+    share = share_of_trace(c)
+    name, top = max(share.items(), key=lambda kv: kv[1])
+    if top > 0.5:
+        warnings.warn(
+            f"{name.split('_')[0]}: {100 * top:.0f} % of the trace; this design cannot "
+            "determine it; consider --parameters aggregated or more configurations",
+            stacklevel=3,
+        )

@@ -56,9 +56,6 @@ def _check_set(parameters: str, model: str = "linear") -> None:
         raise ValueError(f"parameters must be one of {PARAMETER_SETS}, got {parameters!r}")
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, got {model!r}")
-    if model == "full" and parameters != "physical":
-        # Eq. (19)'s per-q2 compliances are parameters of the linear model only.
-        raise ValueError("model='full' needs parameters='physical' (the aggregated set is linear)")
 
 
 def design_parameter_names(
@@ -204,7 +201,7 @@ def design_observation(
     See the module doc.
     """
     if model is None:
-        model = "full" if parameters == "physical" else "linear"
+        model = "full"
     _check_set(parameters, model)
     q = jnp.asarray(q)
     if q.ndim != 2 or q.shape[1] != 6:
@@ -223,24 +220,28 @@ def design_observation(
             obs = jax.vmap(lambda a, f: _full_columns(robot, p0, a, f, None))(q, force)
         else:
             obs = jax.vmap(lambda a, f, t: _full_columns(robot, p0, a, f, t))(q, force, moment)
-        if not include_k1:
-            obs, p0 = obs[:, :, 1:], p0[1:]
-        return obs, p0
-    A = jax.vmap(lambda a, f, t: _linear_columns(robot, a, f, t))(q, force, moment)
-    if parameters == "physical":
+    else:
+        A = jax.vmap(lambda a, f, t: _linear_columns(robot, a, f, t))(q, force, moment)
         dk = jax.vmap(jax.jacfwd(lambda p, q2: _effective_compliance(robot, p, q2)), (None, 0))(
             p0, q[:, 1]
         )  # (m, 6, p): ∂k_eff/∂params
         obs = jnp.einsum("mri,mip->mrp", A, dk)
-        nominal = p0
-    else:
+    nominal = p0
+    if parameters == "aggregated":
         if groups is None or n_groups is None:
             raise ValueError("parameters='aggregated' needs groups and n_groups")
         groups = jnp.asarray(groups)
         if groups.shape != (m,):
             raise ValueError(f"groups must have shape ({m},), got {groups.shape}")
+        # The aggregated joint-2 compliance k2* = 1/(1/k2 + K_comp(q2)) of a configuration
+        # is a local reparameterisation of k2 (Kc and s0 held): ∂Δp/∂k2* = ∂Δp/∂k2 ·
+        # (k2/k2*)², in either model (in the linear one this is exactly eq. 4's J2 J2ᵀ W).
+        k2e = jax.vmap(lambda a: _effective_compliance(robot, p0, a)[1])(q[:, 1])
+        col2 = obs[:, :, 1] * ((p0[1] / k2e) ** 2)[:, None]
         onehot = jax.nn.one_hot(groups, n_groups, dtype=q.dtype)  # (m, G)
-        obs = jnp.concatenate([A[:, :, :1], A[:, :, 1:2] * onehot[:, None, :], A[:, :, 2:]], 2)
+        obs = jnp.concatenate(
+            [obs[:, :, :1], col2[:, :, None] * onehot[:, None, :], obs[:, :, 2:6]], 2
+        )
         count = jnp.maximum(onehot.sum(0), 1.0)
         q2g = (onehot * q[:, 1:2]).sum(0) / count
         k2g = jax.vmap(lambda a: _effective_compliance(robot, p0, a)[1])(q2g)

@@ -16,6 +16,7 @@ from ._criteria import (
     PARAMETER_SETS,
     DesignCriteria,
     criteria_from_observation,
+    default_relative,
     design_observation,
     design_parameter_names,
     select_parameters,
@@ -28,21 +29,28 @@ __all__ = ["DesignProblem", "design_objective"]
 class DesignProblem(eqx.Module):
     """A design problem (static settings + robot).
 
-    - `m`: number of configurations; `loads`: `"vertical"` or `"mixed"` (see `LOADS`).
-    - `parameters`: `"physical"` or `"aggregated"`. `groups` gives the q2 group of each
-      configuration (configurations of a group share one q2 variable); required
-      structure for aggregated (default `i mod 3`), optional for physical.
+    - `m`: number of *distinct* configurations; `loads`: `"vertical"` or `"mixed"` (see
+      `LOADS`).
+    - `parameters`: `"aggregated"` (the paper's eq. 19, the default) or `"physical"`.
+      `groups` gives the q2 group of each configuration (configurations of a group
+      share one q2 variable); required structure for aggregated (default `i mod 3`),
+      optional for physical.
     - `criterion`: `"trace"`, `"det"` or `"weighted"`; `relative` and `weights` as in
       `design_criteria`. `include_k1` defaults to `loads != "vertical"`. `focus`: the
       criterion is about these parameters only (e.g. `("k2", "k3")`, section 5.2).
-    - `model`: observation model (see `design_observation`): `"full"` (default for the
-      physical set, the issue's definition) or `"linear"` (eq. 5; always for aggregated).
+    - `model`: observation model (see `design_observation`): `"full"` (default) or
+      `"linear"` (eq. 5, compensator folded into joint 2).
+    - `repeats`: every configuration is measured this many times (the noise variance of
+      a configuration divided by `repeats`).
+    - `level_gap_deg`: the groups' q2 values at least this far apart (deg), so that the
+      compensator can be recovered from the aggregated joint-2 compliances (two-step
+      or nonlinear fit); 0 lets levels merge.
     """
 
     robot: Robot
     m: int = eqx.field(static=True)
     loads: str = eqx.field(static=True, default="vertical")
-    parameters: str = eqx.field(static=True, default="physical")
+    parameters: str = eqx.field(static=True, default="aggregated")
     criterion: str = eqx.field(static=True, default="trace")
     groups: tuple[int, ...] | None = eqx.field(static=True, default=None)
     relative: bool | None = eqx.field(static=True, default=None)
@@ -50,6 +58,8 @@ class DesignProblem(eqx.Module):
     include_k1: bool | None = eqx.field(static=True, default=None)
     focus: tuple[str, ...] | None = eqx.field(static=True, default=None)
     model: str | None = eqx.field(static=True, default=None)
+    repeats: int = eqx.field(static=True, default=1)
+    level_gap_deg: float = eqx.field(static=True, default=0.0)
 
     def __check_init__(self):
         if self.m < 1:
@@ -60,8 +70,10 @@ class DesignProblem(eqx.Module):
             raise ValueError(f"criterion must be one of {CRITERIA}, got {self.criterion!r}")
         if self.model is not None and self.model not in MODELS:
             raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
-        if self.model == "full" and self.parameters != "physical":
-            raise ValueError("model='full' needs parameters='physical'")
+        if self.level_gap_deg < 0:
+            raise ValueError(f"level_gap_deg must be >= 0, got {self.level_gap_deg}")
+        if self.repeats < 1:
+            raise ValueError(f"repeats must be positive, got {self.repeats}")
         if self.groups is not None and len(self.groups) != self.m:
             raise ValueError(f"groups must have {self.m} entries, got {len(self.groups)}")
 
@@ -75,11 +87,7 @@ class DesignProblem(eqx.Module):
 
     @property
     def obs_model(self) -> str:
-        # The issue defines the physical set by the full model; eq. (19)'s aggregated
-        # compliances exist in the linear model only.
-        if self.model is not None:
-            return self.model
-        return "full" if self.parameters == "physical" else "linear"
+        return "full" if self.model is None else self.model
 
     @property
     def n_groups(self) -> int:
@@ -92,7 +100,9 @@ class DesignProblem(eqx.Module):
 
     @property
     def is_relative(self) -> bool:
-        return self.parameters == "physical" if self.relative is None else self.relative
+        if self.relative is None:
+            return default_relative(self.parameters, self.focus)
+        return self.relative
 
     def names(self) -> tuple[str, ...]:
         return design_parameter_names(
@@ -115,7 +125,8 @@ def _criteria(problem: DesignProblem, q) -> DesignCriteria:
         include_k1=problem.k1,
         model=problem.obs_model,
     )
-    sigma = jnp.full((q.shape[0],), robot.experiment.noise_std, q.dtype)
+    # A configuration measured `repeats` times: its mean has 1/repeats the variance.
+    sigma = jnp.full((q.shape[0],), robot.experiment.noise_std / problem.repeats**0.5, q.dtype)
     return criteria_from_observation(
         obs,
         nominal,

@@ -27,6 +27,7 @@ __all__ = [
     "PAPER_TABLE5_DEG",
     "feasible_q3_range",
     "random_designs",
+    "level_separation",
     "structured_design",
     "paper_table5_plan",
     "paper_to_jaxcal",
@@ -123,10 +124,12 @@ def random_designs(
     *,
     groups: tuple[int, ...] | None = None,
     margin: float = 0.0,
+    level_gap_deg: float = 0.0,
 ) -> np.ndarray:
     """`n` random feasible designs of `m` configurations, `(n, m, 6)` rad: uniform in
     the box, with (q2, q3) rejection-sampled on the wrist constraints (tightened by
-    `margin` m). With `groups`, configurations of one group share their q2."""
+    `margin` m). With `groups`, configurations of one group share their q2, and the
+    groups' q2 values are at least `level_gap_deg` apart (rejection-sampled)."""
     lo, hi = (np.asarray(b) for b in design_bounds(robot))
     if np.any(lo > hi):
         raise ValueError("the experiment ranges of q2/q3 lie outside the joint limits")
@@ -145,6 +148,13 @@ def random_designs(
     if groups is not None:
         g = np.asarray(groups)
         q2g = lo[1] + (hi[1] - lo[1]) * rng.random((n, g.max() + 1))
+        for _ in range(1000):
+            bad = np.flatnonzero(level_separation(q2g) < math.radians(level_gap_deg))
+            if bad.size == 0:
+                break
+            q2g[bad] = lo[1] + (hi[1] - lo[1]) * rng.random((bad.size, g.max() + 1))
+        else:
+            raise ValueError(f"cannot place the q2 levels {level_gap_deg} deg apart in the box")
         q[:, :, 1] = q2g[:, g]
     flat = q.reshape(n * m, 6)
     for _ in range(200):
@@ -156,6 +166,15 @@ def random_designs(
         if groups is None:
             flat[bad, 1] = lo[1] + (hi[1] - lo[1]) * rng.random(bad.size)
     raise ValueError("could not sample feasible configurations: is the feasible region empty?")
+
+
+def level_separation(q2g) -> np.ndarray:
+    """Smallest distance between the q2 levels of each design, `(..., G)` → `(...)`
+    (same unit as the input; +inf for one level). Host-side."""
+    q2g = np.sort(np.asarray(q2g, float), axis=-1)
+    if q2g.shape[-1] < 2:
+        return np.full(q2g.shape[:-1], np.inf)
+    return np.min(np.diff(q2g, axis=-1), axis=-1)
 
 
 def structured_design(
