@@ -1,0 +1,138 @@
+"""The approximate-design bound (against numpy and against exact designs on its pool),
+the default design's efficiency and gain over random designs, repetitions, and explicit
+parameter lists."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcal._criteria import design_criteria
+from jaxcal._design import _pool_values
+from jaxcal._design_bound import design_bound
+from jaxcal._design_observation import design_observation
+from jaxcal._design_problem import DesignProblem, _criteria
+from jaxcal._plans import random_designs
+
+
+def _numpy_phi(robot, P, bound):
+    # Independent check of the bound's bookkeeping: M(w) from the observation matrices
+    # and numpy's inverse (fine in a test), the trace over the problem's parameters.
+    A, nom = design_observation(
+        robot,
+        jnp.asarray(bound.q),
+        jnp.asarray(bound.force),
+        parameters="physical",
+        include_k1=P.k1,
+        model=P.obs_model,
+    )
+    As = np.asarray(A) * np.asarray(nom)[None, None, :]
+    sigma2 = robot.experiment.noise_std**2 / P.repeats
+    M = np.einsum("n,nrp,nrq->pq", bound.weights, As, As) / sigma2
+    return np.linalg.inv(M), As, sigma2
+
+
+@pytest.mark.parametrize("criterion", ["trace", "det"])
+def test_bound_is_certified_and_below_every_design_on_its_pool(robot, criterion):
+    m = 8
+    P = DesignProblem(robot, m, parameters="physical", criterion=criterion, model="linear")
+    b = design_bound(P, n=300, seed=3)
+    assert b.pool_size == 300 and b.weights.min() >= 0
+    assert b.weights.sum() == pytest.approx(1.0)
+    # Equivalence theorem: the weights are (nearly) optimal.
+    assert 0 <= b.gap < 1e-2
+    Minv, As, s2 = _numpy_phi(robot, P, b)
+    if criterion == "trace":
+        phi = np.trace(Minv)  # relative: W = I
+        d = np.einsum("nrp,pq,qs,nrs->n", As, Minv, Minv, As) / s2
+        assert np.max(d) / phi - 1 == pytest.approx(b.gap, abs=1e-8)
+        # bound = φ²/max d, per m configurations
+        assert b.value == pytest.approx(phi / (1 + b.gap) / m, rel=1e-8)
+    else:
+        p = Minv.shape[0]
+        d = np.einsum("nrp,pq,nrq->n", As, Minv, As) / s2
+        assert np.max(d) / p - 1 == pytest.approx(b.gap, abs=1e-8)
+        logdet = np.linalg.slogdet(Minv)[1] + p * np.log(p / np.max(d)) - p * np.log(m)
+        assert np.log(b.value) == pytest.approx(logdet, abs=1e-8)
+    # A lower bound on every exact design of m configurations drawn from the pool.
+    rng = np.random.default_rng(0)
+    picks = np.stack([rng.choice(b.pool_size, m, replace=False) for _ in range(200)])
+    values = np.asarray(
+        jax.jit(jax.vmap(lambda q: _criteria(P, q).value(criterion)))(jnp.asarray(b.q[picks]))
+    )
+    assert np.all(b.value <= values)
+    # ... and nearly attained by the weighted design (gap < 1 %): the best of 200
+    # random picks is far from it, which is what the bound is for.
+    assert b.value < 0.8 * values.min()
+
+
+def test_default_design_efficiency_and_gain_over_random(robot, capsys):
+    # The default problem of `jaxcal design --configs 12`: aggregated set, trace, full
+    # model, 3 q2 levels at least 20° apart, vertical loads.
+    from jaxcal._cli import main
+
+    assert main(["design", "--configs", "12", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["feasible"] and res["model"] == "full" and res["criterion"] == "trace"
+    assert res["bound_pool"] >= 2000
+    print(f"default design: trace {res['value']:.5g}, efficiency {res['efficiency']:.3f}")
+    assert 0.9 <= res["efficiency"] <= 1.0
+    g = tuple(i % 3 for i in range(12))
+    P = DesignProblem(robot, 12, groups=g, level_gap_deg=20.0)
+    rand = random_designs(robot, 200, 12, seed=0, groups=g, level_gap_deg=20.0)
+    v = np.asarray(_pool_values(P, jnp.asarray(rand)))
+    print(f"ratio to the best of 200 random designs: {res['value'] / v.min():.3f}")
+    assert res["value"] <= 0.5 * v.min()
+    q2 = np.sort(np.unique(np.round(np.asarray(res["configs_deg"])[:, 1], 6)))
+    assert len(q2) == 3 and np.diff(q2).min() >= 20.0 - 1e-6
+
+
+def test_repeats_divide_the_covariance_and_fill_the_design_file(robot, tmp_path, capsys):
+    from jaxcal._cli import main
+
+    q = random_designs(robot, 1, 4, seed=5, groups=(0, 1, 2, 0))[0]
+    F = np.tile([0.0, 0.0, -robot.experiment.max_load], (12, 1))
+    P = DesignProblem(robot, 4, groups=(0, 1, 2, 0), model="linear", repeats=3)
+    rep = design_criteria(robot, np.repeat(q, 3, 0), F, model="linear")
+    assert float(_criteria(P, jnp.asarray(q)).trace) == pytest.approx(float(rep.trace), rel=1e-10)
+    out = tmp_path / "rep.csv"
+    args = ["design", "--distinct", "4", "--repeats", "3", "--groups", "2", "--model", "linear"]
+    rc = main(
+        [*args, "--steps", "30", "--starts", "2", "--bound-pool", "400", "-o", str(out), "--json"]
+    )
+    res = json.loads(capsys.readouterr().out)
+    assert rc == 0 and res["distinct"] == 4 and res["repeats"] == 3
+    lines = out.read_text().splitlines()
+    assert len(lines) == 13 and lines[1].split(",")[:6] == lines[3].split(",")[:6]
+    assert 0 < res["efficiency"] <= 1
+
+
+def test_explicit_list_on_the_linear_model_beats_random(robot, capsys):
+    # `jaxcal design --configs 12 --model linear --parameters k2,k3,k4,k5,k6`: the
+    # criterion is the marginal trace of those five (Kc, s0 still estimated);
+    # benchmarks/README.md has its wall time.
+    from jaxcal._cli import main
+
+    rc = main(
+        ["design", "--configs", "12", "--model", "linear", "--parameters", "k2,k3,k4,k5,k6"]
+        + ["--json", "--bound-pool", "0"]
+    )
+    res = json.loads(capsys.readouterr().out)
+    assert rc == 0 and res["feasible"]
+    assert set(k for k, v in res["trace_share"].items() if v > 0) == {
+        f"k{i}_urad_per_Nm" for i in range(2, 7)
+    }
+    P = DesignProblem(
+        robot, 12, parameters="physical", focus=("k2", "k3", "k4", "k5", "k6"), model="linear"
+    )
+    rand = random_designs(robot, 200, 12, seed=0)
+    v = np.asarray(_pool_values(P, jnp.asarray(rand)))
+    assert res["value"] == pytest.approx(
+        float(_criteria(P, jnp.asarray(np.deg2rad(res["configs_deg"]))).trace), rel=1e-8
+    )
+    print(f"explicit list: ratio to the best of 200 random designs {res['value'] / v.min():.3f}")
+    assert res["value"] <= 0.57 * v.min()
