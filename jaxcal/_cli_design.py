@@ -281,6 +281,8 @@ def run_design(args: argparse.Namespace) -> int:
 def _bound_problem(robot, data, parameters, model, criterion="trace"):
     # The bound applies when the file's loads are the experiment's: the test load,
     # vertical ("vertical") or also across the arm ("mixed"), no moments.
+    import jax.numpy as jnp
+
     from ._constraints import design_loads
     from ._design_problem import DesignProblem
     from ._observation import q2_groups
@@ -289,11 +291,13 @@ def _bound_problem(robot, data, parameters, model, criterion="trace"):
     if data.has_moments or robot.experiment is None:
         return None, "the file has moments"
     F = np.asarray(data.force)
-    down = np.asarray(design_loads(robot, data.q, "vertical"))
-    side = np.asarray(design_loads(robot, np.repeat(np.asarray(data.q), 2, 0), "mixed"))[1::2]
-    is_down = np.all(np.isclose(F, down, atol=1e-6 * robot.experiment.max_load), axis=1)
-    is_side = np.all(np.isclose(F, side, atol=1e-6 * robot.experiment.max_load), axis=1)
-    if not np.all(is_down | is_side):
+    q = jnp.asarray(data.q)
+    down = np.asarray(design_loads(robot, q, "vertical"))
+    side = np.asarray(design_loads(robot, jnp.repeat(q, 2, axis=0), "mixed"))[1::2]
+    tol = 1e-6 * robot.experiment.max_load
+    is_down = np.abs(F - down).max(axis=1) <= tol
+    is_side = np.abs(F - side).max(axis=1) <= tol
+    if not bool((is_down | is_side).all()):
         return None, "the loads are not the experiment's test load"
     loads = "vertical" if is_down.all() else "mixed"
     pset, focus = parameters

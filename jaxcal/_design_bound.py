@@ -234,10 +234,17 @@ def design_bound(
     robot = problem.robot
     if robot.experiment is None:
         raise ValueError(f"robot {robot.name!r} has no 'experiment' section (design limits)")
-    kw = dict(n=n, seed=seed, include=include, level_step_deg=level_step_deg, tol=tol)
     if problem.criterion == "weighted":
         bt, bd = (
-            design_bound(dataclasses.replace(problem, criterion=c), max_rounds=max_rounds, **kw)
+            design_bound(
+                dataclasses.replace(problem, criterion=c),
+                n=n,
+                seed=seed,
+                include=include,
+                level_step_deg=level_step_deg,
+                tol=tol,
+                max_rounds=max_rounds,
+            )
             for c in ("trace", "det")
         )
         w1, w2 = problem.weights

@@ -3,21 +3,23 @@ for the two parameter sets and the two observation models (criteria: `_criteria.
 
 **Parameter sets** (`PARAMETER_SETS`)
 
-- `"physical"` (default): `k1..k6` (µrad/(N·m)), `Kc` (N/m), `s0` (m), linearised at the
+- `"physical"`: `k1..k6` (µrad/(N·m)), `Kc` (N/m), `s0` (m), linearised at the
   nominal values. With vertical loads only, `k1` is not identifiable (a vertical force
   has no moment about axis 1, paper section 5.1, in the full model too): callers leave it
   out (`include_k1=False`) and name it as excluded.
-- `"aggregated"`: the paper's eq. (19): `k1`, one aggregated joint-2 compliance per
-  *group* of configurations sharing a q2 value, `k3..k6` (all µrad/(N·m)); linear model.
+- `"aggregated"` (the default of the design functions): the paper's eq. (19): `k1`, one
+  aggregated joint-2 compliance `k2* = 1/(1/k2 + K_comp(q2))` per *group* of
+  configurations sharing a q2 value, `k3..k6` (all µrad/(N·m)). In either model `k2*` is
+  a local reparameterisation of `k2` (Kc, s0 held), so its column is the physical `k2`
+  column times `(k2/k2*)²`.
 
-**Observation models** (`MODELS`, physical set)
+**Observation models** (`MODELS`)
 
-- `"full"` (the issue's definition of the physical set; the default of `design_criteria`,
-  `optimise_design` and the CLI): the Jacobian of the full equilibrium deflection
-  (loaded minus gravity-only equilibrium) in the parameters, the same matrix as
-  `jaxcal.observation_physical`, by the implicit function theorem written out (see
-  `_equilibrium_sensitivity`) so that its q-gradient compiles and runs fast enough to
-  optimise on.
+- `"full"` (the default of `design_criteria`, `optimise_design` and the CLI): the
+  Jacobian of the full equilibrium deflection (loaded minus gravity-only equilibrium)
+  in the parameters, the same matrix as `jaxcal.observation_physical`, by the implicit
+  function theorem written out (see `_equilibrium_sensitivity`) so that its q-gradient
+  compiles and runs fast enough to optimise on.
 - `"linear"`: eq. (5) with joint 2's compliance replaced by the aggregated
   `1/(1/k2 + K_comp(q2; Kc, s0))` (eq. 10), by autodiff; ~10x cheaper per gradient. It
   ignores the gravity pre-deflection and the second-order load terms, through which the
@@ -194,10 +196,10 @@ def design_observation(
     `n_groups`; the aggregated nominal values are the linear model's joint-2 compliance
     at each group's mean q2. Traceable; differentiable in `q`.
 
-    `model`: `"full"` (default for the physical set: the Jacobian of the full
+    `model`: `"full"` (default: the Jacobian of the full
     equilibrium deflection, as `jaxcal.observation_physical`; its q-gradient is a
     second derivative through the equilibrium, ~100x the linear model's cost) or
-    `"linear"` (eq. 5 with the compensator folded into joint 2; always for aggregated).
+    `"linear"` (eq. 5 with the compensator folded into joint 2).
     See the module doc.
     """
     if model is None:

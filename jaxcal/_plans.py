@@ -44,7 +44,9 @@ def paper_q2(q2, *, degrees: bool = True):
     Works elementwise on scalars and arrays (a matplotlib `secondary_xaxis` can take it
     as both directions). Radians with `degrees=False`."""
     mirror = PAPER_Q2_MIRROR_DEG if degrees else math.radians(PAPER_Q2_MIRROR_DEG)
-    return mirror - (float(q2) if np.isscalar(q2) else np.asarray(q2, float))
+    if isinstance(q2, int | float):
+        return mirror - float(q2)
+    return mirror - np.asarray(q2, float)
 
 
 def paper_to_jaxcal(q, *, degrees: bool = True) -> np.ndarray:
