@@ -41,6 +41,7 @@ from ._compensator import (
     spring_length as spring_length,
 )
 from ._constraints import (
+    CONSTRAINTS as CONSTRAINTS,
     constraint_values as constraint_values,
     design_bounds as design_bounds,
     design_loads as design_loads,
@@ -55,6 +56,11 @@ from ._design import (
     DesignProblem as DesignProblem,
     design_objective as design_objective,
     optimise_design as optimise_design,
+    rank_random_designs as rank_random_designs,
+)
+from ._design_bound import (
+    DesignBound as DesignBound,
+    design_bound as design_bound,
 )
 from ._discrepancy import (
     CandidateResult as CandidateResult,

@@ -63,6 +63,7 @@ __all__ = [
     "DesignProblem",
     "design_objective",
     "optimise_design",
+    "rank_random_designs",
 ]
 
 # Wrist-constraint margin (m) of the penalised problem: the optimum of a quadratic
@@ -404,3 +405,32 @@ def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
             "determine it; consider --parameters aggregated or more configurations",
             stacklevel=3,
         )
+
+
+def rank_random_designs(
+    robot: Robot,
+    n: int = 200,
+    m: int = 12,
+    *,
+    seed: int = 0,
+    groups: tuple[int, ...] | None = None,
+    level_gap_deg: float = 20.0,
+    **problem,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`n` random feasible designs of `m` configurations for a design problem (default:
+    the default problem, 3 q2 groups at least `level_gap_deg` apart), sorted by their
+    criterion, best first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further
+    `DesignProblem` settings (`parameters`, `criterion`, `model`, ...). The reference
+    designs a design is compared with (the best, the median)."""
+    _check_x64(robot)
+    parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
+    if listed is not None:
+        problem["focus"] = listed
+    if groups is None and parameters == "aggregated":
+        groups = tuple(i % 3 for i in range(m))
+    gap = level_gap_deg if groups is not None else 0.0
+    P = DesignProblem(robot, m, parameters=parameters, groups=groups, level_gap_deg=gap, **problem)
+    q = random_designs(robot, n, m, seed, groups=groups, level_gap_deg=gap)
+    v = np.asarray(_pool_values(P, jnp.asarray(q)))
+    order = np.argsort(np.where(np.isfinite(v), v, np.inf), kind="stable")
+    return q[order], v[order]

@@ -314,7 +314,7 @@ def design_bound(
     if sel is not None:
         sel_mask = np.zeros(p)
         sel_mask[list(sel)] = 1.0
-    wdiag = sel_mask[None, :] * (1.0 if problem.is_relative else nom**2)
+    wdiag = sel_mask[None, :] * (np.ones_like(nom) if problem.is_relative else nom**2)
     sigma2 = robot.experiment.noise_std**2 / problem.repeats
     w = masks / masks.sum(1, keepdims=True)
     phi = np.full(len(choices), np.inf)

@@ -149,14 +149,18 @@ def random_designs(
         shifted = dataclasses.replace(robot, experiment=tight)
     if groups is not None:
         g = np.asarray(groups)
-        q2g = lo[1] + (hi[1] - lo[1]) * rng.random((n, g.max() + 1))
-        for _ in range(1000):
-            bad = np.flatnonzero(level_separation(q2g) < math.radians(level_gap_deg))
-            if bad.size == 0:
-                break
-            q2g[bad] = lo[1] + (hi[1] - lo[1]) * rng.random((bad.size, g.max() + 1))
+        G = int(g.max()) + 1
+        gap = math.radians(level_gap_deg)
+        slack = (hi[1] - lo[1]) - (G - 1) * gap
+        if slack < 0:
+            raise ValueError(f"cannot place {G} q2 levels {level_gap_deg} deg apart in the box")
+        # Uniform over the level sets with every gap ≥ `gap`: sorted uniform points in
+        # [0, slack] spread by k·gap, then shuffled over the groups.
+        if gap > 0:
+            u = np.sort(rng.random((n, G)) * slack, axis=1) + gap * np.arange(G)
+            q2g = lo[1] + np.take_along_axis(u, np.argsort(rng.random((n, G)), axis=1), axis=1)
         else:
-            raise ValueError(f"cannot place the q2 levels {level_gap_deg} deg apart in the box")
+            q2g = lo[1] + (hi[1] - lo[1]) * rng.random((n, G))
         q[:, :, 1] = q2g[:, g]
     flat = q.reshape(n * m, 6)
     for _ in range(200):

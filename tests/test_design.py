@@ -94,9 +94,6 @@ def test_physical_linearisation_matches_finite_differences(robot, designs):
             focus=("k2", "k3", "k4", "k5", "k6"),
             model="linear",
         ),
-        # The default problem: aggregated set, trace, full model (second derivative
-        # through the equilibrium).
-        dict(),
     ],
 )
 def test_gradient_matches_central_differences(robot, designs, kw):
@@ -149,6 +146,29 @@ def test_full_model_criterion_value_and_gradient(robot, designs):
     ds = jaxcal.Dataset.from_arrays(np.rad2deg(np.asarray(q)), np.asarray(F))
     ref = np.asarray(jaxcal.observation_physical(robot, ds))[:, :, 1:]
     np.testing.assert_allclose(obs, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+    # The aggregated set on the full model (the default problem): k2* = 1/(1/k2 + K_comp)
+    # per configuration reparameterises k2, so its column is ref's k2 column x (k2/k2*)².
+    agg, nom = jax.jit(
+        lambda a: design_observation(
+            robot,
+            a,
+            F,
+            parameters="aggregated",
+            groups=jnp.arange(3),
+            n_groups=3,
+            model="full",
+            include_k1=False,
+        )
+    )(q)
+    k2 = float(robot.compliance[1]) / 1e-6  # µrad/(N·m)
+    cols = ref[:, :, 0] * (k2 / np.asarray(nom)[:3]) ** 2
+    np.testing.assert_allclose(
+        np.asarray(agg)[:, :, :3],
+        cols[:, :, None] * np.eye(3)[:, None, :],
+        rtol=1e-10,
+        atol=1e-12 * np.abs(ref).max(),
+    )
+    np.testing.assert_allclose(np.asarray(agg)[:, :, 3:], ref[:, :, 1:5], rtol=1e-10)
     h = 1e-4
     rng = np.random.default_rng(2)
     V = rng.standard_normal((2, 3, 6))

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcal
 from jaxcal._criteria import design_criteria
 from jaxcal._design import _pool_values
 from jaxcal._design_bound import design_bound
@@ -81,13 +82,11 @@ def test_default_design_efficiency_and_gain_over_random(robot, capsys):
     assert res["bound_pool"] >= 2000
     print(f"default design: trace {res['value']:.5g}, efficiency {res['efficiency']:.3f}")
     assert 0.9 <= res["efficiency"] <= 1.0
-    g = tuple(i % 3 for i in range(12))
-    P = DesignProblem(robot, 12, groups=g, level_gap_deg=20.0)
-    rand = random_designs(robot, 200, 12, seed=0, groups=g, level_gap_deg=20.0)
-    v = np.asarray(_pool_values(P, jnp.asarray(rand)))
-    print(f"ratio to the best of 200 random designs: {res['value'] / v.min():.3f}")
-    assert res["value"] <= 0.5 * v.min()
-    q2 = np.sort(np.unique(np.round(np.asarray(res["configs_deg"])[:, 1], 6)))
+    q_rand, v = jaxcal.rank_random_designs(robot, 200, seed=0)
+    print(f"ratio to the best of 200 random designs: {res['value'] / v[0]:.3f}")
+    assert res["value"] <= 0.5 * v[0]
+    q = np.deg2rad(np.asarray(res["configs_deg"]))
+    q2 = np.sort(np.unique(np.round(np.rad2deg(q[:, 1]), 6)))
     assert len(q2) == 3 and np.diff(q2).min() >= 20.0 - 1e-6
 
 
@@ -136,3 +135,22 @@ def test_explicit_list_on_the_linear_model_beats_random(robot, capsys):
     )
     print(f"explicit list: ratio to the best of 200 random designs {res['value'] / v.min():.3f}")
     assert res["value"] <= 0.57 * v.min()
+
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_aggregated_bound_is_below_a_design_in_its_pool(robot, relative):
+    # The aggregated set's bound (minimum over level choices) in either scale: a design
+    # added to the pool has efficiency in (0, 1].
+    q, v = jaxcal.rank_random_designs(robot, 20, model="linear", relative=relative)
+    P = DesignProblem(
+        robot,
+        12,
+        groups=tuple(i % 3 for i in range(12)),
+        model="linear",
+        relative=relative,
+        level_gap_deg=20.0,
+    )
+    b = design_bound(P, n=600, include=q[0])
+    assert b.levels_deg is not None and len(b.levels_deg) == 3
+    assert np.diff(sorted(b.levels_deg)).min() >= 20.0 - 1e-6
+    assert 0 < b.efficiency(float(v[0])) <= 1.0
