@@ -161,7 +161,7 @@ def test_full_model_criterion_value_and_gradient(robot, designs):
         )
     )(q)
     k2 = float(robot.compliance[1]) / 1e-6  # µrad/(N·m)
-    cols = ref[:, :, 0] * (k2 / np.asarray(nom)[:3]) ** 2
+    cols = ref[:, :, 0] * ((k2 / np.asarray(nom)[:3]) ** 2)[:, None]
     np.testing.assert_allclose(
         np.asarray(agg)[:, :, :3],
         cols[:, :, None] * np.eye(3)[:, None, :],
