@@ -23,7 +23,7 @@ cells = [
         "µrad/(N·m), on the *full* equilibrium model linearised at the nominal values "
         "(jaxcal's default). O1 = trace, O2 = determinant, and O3 = ½·O1/O1* + ½·O2/O2* with "
         "O1*, O2* the best values found: each criterion normalised by its optimum, so that O3 "
-        "weighs both (a raw sum ½O1 + ½O2 is just ½O1, O2 being ~1e-25).\n\n"
+        "weighs both (a raw sum ½O1 + ½O2 would be ½O1 alone: O2 is tiny, see Table 1).\n\n"
         "Every number quoted in a markdown cell is printed by a code cell above it."
     ),
     code(
