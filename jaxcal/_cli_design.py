@@ -154,11 +154,17 @@ def register(sub) -> None:
     e.set_defaults(func=run_evaluate)
 
 
-def _std_rows(c):
+def _shares(c) -> dict[str, float]:
+    # Each parameter's share of the trace; NaN where the design is rank deficient.
     from ._criteria import share_of_trace
+
+    return share_of_trace(c) if bool(c.full_rank) else dict.fromkeys(c.names, float("nan"))
+
+
+def _std_rows(c):
     from ._parameters import parameter_units
 
-    share = share_of_trace(c) if bool(c.full_rank) else dict.fromkeys(c.names, float("nan"))
+    share = _shares(c)
     return [
         [n, parameter_units(n), float(v), float(s), float(r), 100 * share[n]]
         for n, v, s, r in zip(c.names, c.nominal, c.std, c.relative_std, strict=True)
@@ -206,8 +212,6 @@ def run_design(args: argparse.Namespace) -> int:
     G = args.groups if args.groups is not None else (3 if pset == "aggregated" else None)
     if G is not None and not 1 <= G <= n:
         raise ValueError(f"--groups must be in 1..{n} (distinct configurations), got {G}")
-    if G is not None and (G - 1) * args.level_gap > 120:
-        raise ValueError(f"{G} q2 levels cannot be {args.level_gap} deg apart; lower --level-gap")
     groups = None if G is None else tuple(i % G for i in range(n))
     d = optimise_design(
         robot,
@@ -281,19 +285,18 @@ def run_design(args: argparse.Namespace) -> int:
 def _bound_problem(robot, data, parameters, model, criterion="trace"):
     # The bound applies when the file's loads are the experiment's: the test load,
     # vertical ("vertical") or also across the arm ("mixed"), no moments.
-    import jax.numpy as jnp
-
-    from ._constraints import design_loads
+    from ._constraints import design_loads, horizontal_loads
     from ._design_problem import DesignProblem
     from ._observation import q2_groups
     from ._plans import level_separation
 
-    if data.has_moments or robot.experiment is None:
+    if robot.experiment is None:
+        return None, "the robot has no experiment section"
+    if data.has_moments:
         return None, "the file has moments"
     F = np.asarray(data.force)
-    q = jnp.asarray(data.q)
-    down = np.asarray(design_loads(robot, q, "vertical"))
-    side = np.asarray(design_loads(robot, jnp.repeat(q, 2, axis=0), "mixed"))[1::2]
+    down = np.asarray(design_loads(robot, data.q, "vertical"))
+    side = np.asarray(horizontal_loads(robot, data.q))
     tol = 1e-6 * robot.experiment.max_load
     is_down = np.abs(F - down).max(axis=1) <= tol
     is_side = np.abs(F - side).max(axis=1) <= tol
@@ -309,17 +312,13 @@ def _bound_problem(robot, data, parameters, model, criterion="trace"):
     problem = DesignProblem(
         robot,
         len(data),
-        loads,
-        pset,
-        criterion,
-        groups,
-        None,
-        (0.5, 0.5),
-        None,
-        focus,
-        model,
-        1,
-        gap,
+        loads=loads,
+        parameters=pset,
+        criterion=criterion,
+        groups=groups,
+        focus=focus,
+        model=model,
+        level_gap_deg=gap,
     )
     return problem, None
 
@@ -328,7 +327,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from ._constraints import CONSTRAINTS, constraint_values
-    from ._criteria import design_criteria, resolve_parameters
+    from ._criteria import default_relative, design_criteria, resolve_parameters
     from ._design_bound import design_bound
     from ._io import read_dataset
     from ._robot import load_robot
@@ -352,9 +351,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         for r in (True, False)
     )
     # The criterion's own scale: absolute for aggregated and compliance lists.
-    own = design_criteria(
-        robot, data.q, data.force, moment, parameters=args.parameters, sigma=data.sigma, model=model
-    )
+    own = rel if default_relative(pset, focus) else ab
     bound, why = None, "--bound-pool 0"
     if args.bound_pool > 0 and bool(own.full_rank):
         problem, why = _bound_problem(robot, data, (pset, focus), model)
@@ -380,7 +377,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
     }
     crit["logdet_relative"] = float(rel.logdet)
     excluded = [n for n in robot.parameter_names if pset == "physical" and n not in rel.names]
-    shares = _std_rows(own)
     if args.json:
         print_json(
             {
@@ -398,7 +394,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 "relative_std": dict(
                     zip(rel.names, np.asarray(rel.relative_std).tolist(), strict=True)
                 ),
-                "trace_share": {r[0]: r[5] / 100 for r in shares},
+                "trace_share": _shares(own),
                 "feasible": feasible,
                 "violations": violations,
             }
@@ -419,7 +415,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     else:
         print(f"\ntrace ({scale}) {float(own.trace):.6g}; no efficiency ({why})")
     print()
-    print(format_table(_STD_HEADS, shares))
+    print(format_table(_STD_HEADS, _std_rows(own)))
     if feasible is not None:
         bad = {k: v for k, v in violations.items() if v}
         print(f"\nfeasible: {feasible}" + (f"  violated (rows): {bad}" if bad else ""))

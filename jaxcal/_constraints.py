@@ -27,6 +27,7 @@ __all__ = [
     "LOADS",
     "design_bounds",
     "design_loads",
+    "horizontal_loads",
     "constraint_values",
     "is_feasible",
 ]
@@ -63,9 +64,17 @@ def design_loads(
     down = jnp.broadcast_to(jnp.array([0.0, 0.0, -fmax], q.dtype), (m, 3))
     if loads == "vertical":
         return down
-    side = fmax * jnp.stack([-jnp.sin(q[:, 0]), jnp.cos(q[:, 0]), jnp.zeros(m, q.dtype)], 1)
     odd = (jnp.arange(m) % 2 == 1)[:, None]
-    return jnp.where(odd, side, down)
+    return jnp.where(odd, horizontal_loads(robot, q), down)
+
+
+def horizontal_loads(robot: Robot, q: Float[Array, "m 6"]) -> Float[Array, "m 3"]:
+    """The largest test load (N, base frame) across the arm, direction `(−sin q1, cos q1,
+    0)`: the horizontal load of `loads="mixed"`, for every configuration."""
+    fmax = _experiment(robot).max_load
+    q = jnp.asarray(q)
+    zero = jnp.zeros(q.shape[0], q.dtype)
+    return fmax * jnp.stack([-jnp.sin(q[:, 0]), jnp.cos(q[:, 0]), zero], 1)
 
 
 def constraint_values(robot: Robot, q: Float[Array, "m 6"]) -> Float[Array, "m 3"]:

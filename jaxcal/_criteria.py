@@ -63,6 +63,7 @@ __all__ = [
     "resolve_parameters",
     "default_relative",
     "share_of_trace",
+    "observe_jit",
 ]
 
 CRITERIA: tuple[str, ...] = ("trace", "det", "weighted")
@@ -286,12 +287,12 @@ def design_criteria(
         names = design_parameter_names(
             robot, "aggregated", include_k1=include_k1, q2_values_deg=np.rad2deg(vals)
         )
-        obs, nominal = _observe_jit(
+        obs, nominal = observe_jit(
             robot, q, force, moment, "aggregated", idx, len(vals), include_k1, model
         )
     else:
         names = design_parameter_names(robot, "physical", include_k1=include_k1)
-        obs, nominal = _observe_jit(
+        obs, nominal = observe_jit(
             robot, q, force, moment, "physical", None, None, include_k1, model
         )
     return criteria_from_observation(
@@ -370,7 +371,9 @@ def select_parameters(
 
 
 @eqx.filter_jit
-def _observe_jit(robot, q, force, moment, parameters, groups, n_groups, include_k1, model):
+def observe_jit(robot, q, force, moment, parameters, groups, n_groups, include_k1, model):
+    """`design_observation` compiled, with every setting positional (host-side callers:
+    `design_criteria`, the bound's candidate pool)."""
     return design_observation(
         robot,
         q,

@@ -52,7 +52,7 @@ from jaxtyping import Array, Float
 
 from ._constraints import constraint_values, design_bounds, design_loads
 from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
-from ._design_bound import DesignBound, design_bound
+from ._design_bound import DesignBound, design_bound, has_bound
 from ._design_problem import DesignProblem, _criteria, _log_value, design_objective
 from ._io import Dataset
 from ._plans import level_separation, random_designs
@@ -286,20 +286,20 @@ def optimise_design(
     parameters, listed = resolve_parameters(robot, parameters)
     if listed is not None:
         focus = listed
+    # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
     problem = DesignProblem(
         robot,
         m,
-        loads,
-        parameters,
-        criterion,
-        groups,
-        relative,
-        weights,
-        None,
-        focus,
-        model,
-        repeats,
-        level_gap_deg if groups is not None or parameters == "aggregated" else 0.0,
+        loads=loads,
+        parameters=parameters,
+        criterion=criterion,
+        groups=groups,
+        relative=relative,
+        weights=weights,
+        focus=focus,
+        model=model,
+        repeats=repeats,
+        level_gap_deg=level_gap_deg,
     )
     g = problem.group_index
     random_best = None
@@ -349,20 +349,20 @@ def optimise_design(
     force = np.asarray(design_loads(robot, jnp.asarray(qb), loads))
     crit = jax.tree.map(lambda x: x[best], crits)
     names = problem.names()
-    if g is not None and parameters == "aggregated":
-        q2g = [float(np.rad2deg(qb[np.asarray(g) == k, 1].mean())) for k in range(problem.n_groups)]
+    # The groups' q2 values (rad), for the aggregated names and the level-gap check.
+    q2g = None if g is None else [qb[np.asarray(g) == k, 1].mean() for k in range(problem.n_groups)]
+    if q2g is not None and parameters == "aggregated":
         names = design_parameter_names(
-            robot, parameters, include_k1=problem.k1, q2_values_deg=np.asarray(q2g)
+            robot, parameters, include_k1=problem.k1, q2_values_deg=np.rad2deg(q2g)
         )
     crit = dataclasses.replace(crit, names=names)
     # Checked on the returned angles, not taken from the optimiser's bookkeeping.
     cvb = np.asarray(_constraints_jit(robot, jnp.asarray(qb)))
-    if g is not None and problem.n_groups > 1:
-        q2g = [qb[np.asarray(g) == k, 1].mean() for k in range(problem.n_groups)]
+    if q2g is not None and problem.n_groups > 1:
         gap_viol = np.deg2rad(problem.level_gap_deg) - float(level_separation(q2g))
         cvb = np.append(cvb.ravel(), gap_viol)
     bound = None
-    if bound_pool > 0 and not (criterion == "det" and problem.focus is not None):
+    if bound_pool > 0 and has_bound(problem):
         bound = design_bound(problem, n=bound_pool, seed=seed, include=qb)
         if progress:
             print(
@@ -395,7 +395,9 @@ def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
     # it cannot determine (typically Kc in the physical set).
     if criterion == "det" or not bool(c.full_rank):
         return
-    if parameters != "physical":
+    if parameters != "physical" or not c.relative:
+        # Absolute shares (compliances only) say which compliance is largest, not which
+        # parameter the design cannot determine.
         return
     share = share_of_trace(c)
     name, top = max(share.items(), key=lambda kv: kv[1])
@@ -426,11 +428,10 @@ def rank_random_designs(
     parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
     if listed is not None:
         problem["focus"] = listed
-    if groups is None and parameters == "aggregated":
-        groups = tuple(i % 3 for i in range(m))
-    gap = level_gap_deg if groups is not None else 0.0
-    P = DesignProblem(robot, m, parameters=parameters, groups=groups, level_gap_deg=gap, **problem)
-    q = random_designs(robot, n, m, seed, groups=groups, level_gap_deg=gap)
+    P = DesignProblem(
+        robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem
+    )
+    q = random_designs(robot, n, m, seed, groups=P.group_index, level_gap_deg=level_gap_deg)
     v = np.asarray(_pool_values(P, jnp.asarray(q)))
     order = np.argsort(np.where(np.isfinite(v), v, np.inf), kind="stable")
     return q[order], v[order]

@@ -44,15 +44,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._constraints import design_bounds, design_loads
-from ._criteria import select_parameters
+from ._constraints import design_bounds, design_loads, horizontal_loads
+from ._criteria import observe_jit, select_parameters
 from ._dense import cho_solve, cholesky
-from ._design_observation import design_observation
 from ._design_problem import DesignProblem
 from ._plans import feasible_q3_range, random_designs
 from ._robot import Robot
 
-__all__ = ["DesignBound", "design_bound", "candidate_pool"]
+__all__ = ["DesignBound", "design_bound", "candidate_pool", "has_bound"]
 
 _ROUND = 200  # multiplicative steps per round
 _MAX_CHOICES = 5000  # level choices of the aggregated bound iterated at once
@@ -121,24 +120,10 @@ def candidate_pool(
         q, level = np.concatenate(rows), np.asarray(level)
     force = np.asarray(design_loads(robot, jnp.asarray(q), "vertical"))
     if loads == "mixed":
-        side = np.asarray(design_loads(robot, jnp.asarray(np.repeat(q, 2, 0)), "mixed"))[1::2]
+        side = np.asarray(horizontal_loads(robot, jnp.asarray(q)))
         q, level = np.concatenate([q, q]), np.concatenate([level, level])
         force = np.concatenate([force, side])
     return q, force, level
-
-
-@eqx.filter_jit
-def _pool_observation(robot, q, force, groups, n_groups, include_k1, model, parameters):
-    return design_observation(
-        robot,
-        q,
-        force,
-        parameters=parameters,
-        groups=groups,
-        n_groups=n_groups,
-        include_k1=include_k1,
-        model=model,
-    )
 
 
 def _observe(robot, problem: DesignProblem, q, force, level, n_levels, chunk=512):
@@ -152,15 +137,16 @@ def _observe(robot, problem: DesignProblem, q, force, level, n_levels, chunk=512
     agg = problem.parameters == "aggregated"
     out, nominal = [], None
     for s in range(0, len(qp), chunk):
-        obs, nominal = _pool_observation(
+        obs, nominal = observe_jit(
             problem.robot,
             jnp.asarray(qp[s : s + chunk]),
             jnp.asarray(fp[s : s + chunk]),
-            jnp.asarray(np.maximum(lp[s : s + chunk], 0)) if agg else None,
+            None,
+            problem.parameters,
+            jnp.asarray(lp[s : s + chunk]) if agg else None,
             n_levels if agg else None,
             problem.k1,
             problem.obs_model,
-            problem.parameters,
         )
         out.append(np.asarray(obs))
     return np.concatenate(out)[:n], np.asarray(nominal)
@@ -212,6 +198,12 @@ def _lower_bound(phi, dmax, criterion, p):
     return phi + p * np.log(p / dmax)
 
 
+def has_bound(problem: DesignProblem) -> bool:
+    """Whether `design_bound` covers the problem: every criterion, except that a
+    determinant (det, or weighted's det part) of a parameter subset (focus) has none."""
+    return problem.focus is None or problem.criterion == "trace"
+
+
 def design_bound(
     problem: DesignProblem,
     *,
@@ -234,6 +226,8 @@ def design_bound(
     robot = problem.robot
     if robot.experiment is None:
         raise ValueError(f"robot {robot.name!r} has no 'experiment' section (design limits)")
+    if not has_bound(problem):
+        raise ValueError("the det bound of a parameter subset (focus) is not implemented")
     if problem.criterion == "weighted":
         bt, bd = (
             design_bound(
@@ -251,8 +245,6 @@ def design_bound(
         return dataclasses.replace(
             bt, value=w1 * bt.value + w2 * bd.value, criterion="weighted", gap=max(bt.gap, bd.gap)
         )
-    if problem.criterion == "det" and problem.focus is not None:
-        raise ValueError("the det bound of a parameter subset (focus) is not implemented")
     agg = problem.parameters == "aggregated"
     inc = np.zeros((0, 6)) if include is None else np.asarray(include, float).reshape(-1, 6)
     levels = None

@@ -74,6 +74,14 @@ class DesignProblem(eqx.Module):
             raise ValueError(f"level_gap_deg must be >= 0, got {self.level_gap_deg}")
         if self.repeats < 1:
             raise ValueError(f"repeats must be positive, got {self.repeats}")
+        e = self.robot.experiment
+        if e is not None and self.group_index is not None and self.level_gap_deg > 0:
+            span = math.degrees(e.q2_range[1] - e.q2_range[0])
+            if (self.n_groups - 1) * self.level_gap_deg > span:
+                raise ValueError(
+                    f"level_gap_deg: {self.n_groups} q2 levels cannot be "
+                    f"{self.level_gap_deg:g} deg apart in the {span:g} deg q2 range"
+                )
         if self.groups is not None and len(self.groups) != self.m:
             raise ValueError(f"groups must have {self.m} entries, got {len(self.groups)}")
 
