@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -68,7 +69,7 @@ class LinkBending(AbstractEffect):
     plane, which no joint spring of the nominal model can do with the same lever arms.
     """
 
-    joint: int
+    joint: int = eqx.field(static=True)
     compliance: Float[Array, ""]  # µrad/(N·m)
     n_dof = 2
 
@@ -125,7 +126,7 @@ class Backlash(AbstractEffect):
     torque.
     """
 
-    joint: int
+    joint: int = eqx.field(static=True)
     half_width: Float[Array, ""]  # µrad
 
     def __check_init__(self):
@@ -152,7 +153,7 @@ class JointNonlinearity(AbstractEffect):
     proportional to the load.
     """
 
-    joint: int
+    joint: int = eqx.field(static=True)
     hardening: Float[Array, ""]  # dimensionless
 
     def __check_init__(self):

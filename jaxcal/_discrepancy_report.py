@@ -247,7 +247,7 @@ def _separating(sm: SuperModel, data: Dataset, rep: DiscoveryReport, deflections
     }
     sigma_mm = rep._sigma_mm
     found = []
-    design = sm.design
+    design, groups = sm.design, sm.groups
     try:
         for name, f in loads.items():
             alt = Dataset(
@@ -274,7 +274,6 @@ def _separating(sm: SuperModel, data: Dataset, rep: DiscoveryReport, deflections
                     }
                 )
     finally:
-        sm.design = design
-        sm.groups = np.asarray(design[4])
+        sm.design, sm.groups = design, groups
     found.sort(key=lambda d: -d["difference_sigma"])
     rep.separating = found[:5]

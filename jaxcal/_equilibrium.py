@@ -29,6 +29,7 @@ from ._robot import G, Robot
 
 __all__ = [
     "Equilibrium",
+    "measured_deflections",
     "total_potential",
     "equilibrium",
     "deflection",
@@ -296,3 +297,47 @@ def implicit_step(robot: Robot, q, force, moment, x, converged, *, symmetric: bo
     dx = lu_solve(*lu_factor(H), g)
     ok = good & jnp.all(jnp.isfinite(dx))
     return x - jnp.where(jnp.isfinite(dx), dx, 0.0), ok
+
+
+#: Model value put in place of a failed equilibrium, m: far outside any real deflection,
+#: so an optimiser step into a region where the model fails is always rejected.
+FAILED_DEFLECTION = 1.0
+
+
+def measured_deflections(
+    robot: Robot,
+    q_all: Float[Array, "m 6"],
+    force_all: Float[Array, "m 3"],
+    moment_all: Float[Array, "m 3"] | None,
+    inverse: Int[Array, " n"],
+) -> tuple[Float[Array, "n 3"], Bool[Array, " n"], Float[Array, "m ndof"]]:
+    """The measured quantity (loaded minus unloaded tool point, then the observation
+    effects) of `n` rows of a design with the full model, differentiable in `robot` by
+    forward mode, never raising.
+
+    `q_all` holds the `n` rows' configurations followed by their `u` distinct
+    configurations (`inverse` (n,) maps a row to its one), `force_all` / `moment_all` the
+    rows' loads followed by zeros. Every equilibrium goes through *one* vmapped Newton
+    solve (`batch_roots`): one copy of the equilibrium program in a compiled fit instead
+    of two. (Warm-starting it at the roots of a fit's starting point was measured: the
+    batch's slowest solve still takes 3 Newton steps instead of 4, and the extra solve
+    ate the gain.)
+
+    Returns `(dp (n, 3) m, ok (n,), roots (m, ndof))`; a row whose equilibria failed is
+    `FAILED_DEFLECTION` in `dp` and `False` in `ok`.
+    """
+    n = inverse.shape[0]
+    xs, conv = batch_roots(stop_gradients(robot), q_all, force_all, moment_all)
+    # A tool moment makes the Hessian non-symmetric (no potential of a finite rotation).
+    symmetric = moment_all is None
+
+    def tool(q, f, m, x, c):
+        x, ok = implicit_step(robot, q, f, m, x, c, symmetric=symmetric)
+        return _tool_pose(robot, q, x)[0], ok
+
+    m_axis = None if moment_all is None else 0
+    pt, oks = jax.vmap(tool, in_axes=(0, 0, m_axis, 0, 0))(q_all, force_all, moment_all, xs, conv)
+    dp = pt[:n] - pt[n:][inverse]
+    dp = jax.vmap(lambda q, f, d: observe_effects(robot, q, f, d))(q_all[:n], force_all[:n], dp)
+    ok = oks[:n] & oks[n:][inverse] & jnp.all(jnp.isfinite(dp), axis=1)
+    return jnp.where(ok[:, None], dp, FAILED_DEFLECTION), ok, xs

@@ -25,7 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._compensator import compensator_stiffness
-from ._equilibrium import _solve, _tool_pose, batch_roots, implicit_step, stop_gradients
+from ._equilibrium import measured_deflections
 from ._ident_result import IdentificationResult, free_mask, make_result, resolve_name
 from ._io import Dataset
 from ._lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
@@ -148,52 +148,24 @@ def _has_moments(data: Dataset) -> bool:
         return True
 
 
-def _equilibrium_x(robot: Robot, q, force, moment):
-    """Equilibrium deflections θ* with derivatives w.r.t. the robot's parameters from
-    one Newton step on the stop-gradient root, `x* − H⁻¹ g(x*, p)`: the value is the
-    root, the first derivative is the implicit-function one, `−H⁻¹ ∂g/∂p`. Unlike the
-    optimistix adjoint, its linear solve never raises, so a trial point of the
-    optimiser where the equilibrium fails gives a flag, not an exception (essential
-    under `vmap`)."""
-    eq = _solve(stop_gradients(robot), q, force, moment, check_stability=False)
-    return implicit_step(robot, q, force, moment, eq.x, eq.converged)
-
-
-#: Model value put in place of a failed equilibrium, m: far outside any real deflection,
-#: so an optimiser step into a region where the model fails is always rejected.
-_FAILED = 1.0
-
-
 def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=None):
     """`predict(p) -> ((n, 3) deflections m, (n,) ok)`: the full equilibrium model
-    (loaded minus unloaded, eq. 17) of every row for physical parameters `p` (user
-    units), differentiable in `p` (forward mode). The unloaded equilibrium is solved
-    once per distinct configuration (`q_unique`, `inverse` from `np.unique`, found
-    here when `data.q` is concrete)."""
+    (`measured_deflections`) of every row for physical parameters `p` (user units),
+    differentiable in `p` (forward mode). The unloaded equilibrium is solved once per
+    distinct configuration (`q_unique`, `inverse` from `np.unique`, found here when
+    `data.q` is concrete)."""
     if q_unique is None or inverse is None:
         q_unique, inverse = _unique_rows(data.q)
     use_m = _has_moments(data)
-    n = data.q.shape[0]
-    # Loaded rows and unloaded configurations go through ONE vmapped solve (zero load for
-    # the latter): a single copy of the equilibrium program in the compiled fit instead of
-    # two, which roughly halves its compile time; a zero moment changes nothing.
     zeros = jnp.zeros((q_unique.shape[0], 3), data.force.dtype)
     q_all = jnp.concatenate([jnp.asarray(data.q), jnp.asarray(q_unique, data.q.dtype)])
     f_all = jnp.concatenate([data.force, zeros])
-    m_all = jnp.concatenate([data.moment, zeros])
+    m_all = jnp.concatenate([data.moment, zeros]) if use_m else None
 
     def predict(p):
         r = set_parameters(robot, p)
-        xs, conv = batch_roots(stop_gradients(r), q_all, f_all, m_all if use_m else None)
-
-        def tool(q, f, m, x, c):
-            x, ok = implicit_step(r, q, f, m if use_m else None, x, c)
-            return _tool_pose(r, q, x)[0], ok
-
-        pt, oks = jax.vmap(tool)(q_all, f_all, m_all, xs, conv)
-        ok = oks[:n] & oks[n:][inverse]
-        dp = pt[:n] - pt[n:][inverse]
-        return jnp.where(ok[:, None] & jnp.isfinite(dp), dp, _FAILED), ok
+        dp, ok, _ = measured_deflections(r, q_all, f_all, m_all, inverse)
+        return dp, ok
 
     return predict
 

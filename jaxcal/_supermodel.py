@@ -27,11 +27,10 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from ._batching import map_in_chunks
 from ._candidates import Candidate
 from ._dense import SmallQR
-from ._effects import observe_effects
-from ._equilibrium import _tool_pose
-from ._identification import _equilibrium_x
+from ._equilibrium import measured_deflections
 from ._io import Dataset
 from ._robot import URAD, Robot
 
@@ -40,9 +39,6 @@ __all__ = ["SuperModel", "BatchFit", "configuration_groups"]
 #: Batch members per call of a compiled function (batches are padded to a multiple, so
 #: one compile serves every batch size).
 CHUNK = 8
-#: Model value put in place of a failed equilibrium, m (far outside any deflection, so
-#: an LM trial step into a region where the model fails is rejected).
-_FAILED = 1.0
 _COMPILED: dict = {}
 #: Candidate-parameter slots of one fit: the most parameters a candidate has (tracker 3).
 SLOTS = 3
@@ -88,18 +84,6 @@ class BatchFit(eqx.Module):
     @property
     def ok(self) -> np.ndarray:
         return self.converged & self.valid & self.well
-
-
-def _chunks(fn, B, *arrays):
-    """Call `fn` on fixed-size chunks (padding with copies of member 0); numpy out."""
-    pad = (-B) % CHUNK
-    idx = np.concatenate([np.arange(B), np.zeros(pad, int)])
-    arrays = [np.asarray(a)[idx] for a in arrays]
-    outs = []
-    for i in range(0, B + pad, CHUNK):
-        o = fn(*(jnp.asarray(a[i : i + CHUNK]) for a in arrays))
-        outs.append([np.asarray(x) for x in o])
-    return tuple(np.concatenate([o[k] for o in outs])[:B] for k in range(len(outs[0])))
 
 
 class SuperModel:
@@ -148,11 +132,13 @@ class SuperModel:
         inv = configuration_groups(data.q)
         first = np.array([np.flatnonzero(inv == g)[0] for g in range(inv.max() + 1)])
         self.groups = inv
+        # Rows then their distinct configurations (zero load), as `measured_deflections`
+        # takes them.
+        zeros = np.zeros((len(first), 3))
         self.design = (
-            jnp.asarray(data.q),
-            jnp.asarray(data.force),
-            jnp.asarray(data.moment),
-            jnp.asarray(np.asarray(data.q)[first]),
+            jnp.asarray(np.concatenate([np.asarray(data.q), np.asarray(data.q)[first]])),
+            jnp.asarray(np.concatenate([np.asarray(data.force), zeros])),
+            jnp.asarray(np.concatenate([np.asarray(data.moment), zeros])),
             jnp.asarray(inv),
         )
 
@@ -168,25 +154,14 @@ class SuperModel:
         return eqx.tree_at(lambda r: r.effects, r, base.effects + effects)
 
     def _predict(self, robot, design, p):
-        """`((n, 3) deflections m, (n,) ok)`: loaded minus unloaded full equilibrium,
-        differentiable in `p` by forward mode (`_equilibrium_x`: implicit-function
+        """`((n, 3) deflections m, (n,) ok)` of the full model with effects
+        (`measured_deflections`: one vmapped solve of every equilibrium; implicit-function
         derivatives whose linear solve never raises, so a failed LM trial point is a
         flag, not an exception under `vmap`)."""
-        r = self.to_robot(p, robot)
-        q_all, force, moment, q_u, inv = design
-        zero = jnp.zeros(3, p.dtype)
-
-        def tool(q, f, m):
-            x, ok = _equilibrium_x(r, q, f, m)
-            return _tool_pose(r, q, x)[0], ok
-
-        p1, ok1 = jax.vmap(lambda q, f, m: tool(q, f, m if self.use_moment else None))(
-            q_all, force, moment
-        )
-        p0, ok0 = jax.vmap(lambda q: tool(q, zero, None))(q_u)
-        dp = jax.vmap(lambda q, f, d: observe_effects(r, q, f, d))(q_all, force, p1 - p0[inv])
-        ok = ok1 & ok0[inv] & jnp.all(jnp.isfinite(dp), axis=1)
-        return jnp.where(ok[:, None], dp, _FAILED), ok
+        q_all, force_all, moment_all, inv = design
+        m_all = moment_all if self.use_moment else None
+        dp, ok, _ = measured_deflections(self.to_robot(p, robot), q_all, force_all, m_all, inv)
+        return dp, ok
 
     def _compiled(self):
         if self._key not in _COMPILED:
@@ -215,11 +190,11 @@ class SuperModel:
             # Forward mode, one JVP per fitted parameter (≤ 11): the Jacobian is
             # materialised once per LM step, so LM's linearisation is a plain matrix
             # product (transposing through the equilibrium's inner solves is not needed).
-            f = lambda v: weighted(v, m)[0]
-            r, J = jax.vmap(lambda e: jax.jvp(f, (u,), (e,)), out_axes=(None, 1))(
-                jnp.eye(u.shape[0], dtype=u.dtype)
-            )
-            return r, jnp.where(jnp.isfinite(J), J, 0.0)
+            f = lambda v: weighted(v, m)
+            r, J, ok = jax.vmap(
+                lambda e: jax.jvp(f, (u,), (e,), has_aux=True), out_axes=(None, 1, None)
+            )(jnp.eye(u.shape[0], dtype=u.dtype))
+            return r, jnp.where(jnp.isfinite(J), J, 0.0), ok
 
         @jax.custom_jvp
         def residual(u):
@@ -228,7 +203,7 @@ class SuperModel:
         @residual.defjvp
         def _residual_jvp(primals, tangents):
             (u,), (t,) = primals, tangents
-            r, J = r_and_jac(u, mask)
+            r, J, _ = r_and_jac(u, mask)
             return r, J @ t
 
         u0 = jnp.zeros(nn + SLOTS, p0.dtype)
@@ -254,8 +229,8 @@ class SuperModel:
         # `fit` is one scalar for the whole batch (not vmapped), so this stays a real
         # branch: evaluations (predictions, Jacobians for screening) share the compile.
         u, solved, steps = jax.lax.cond(fit, run_fit, no_fit, None)
-        _, ok = weighted(u, mask)
-        r, Jw = r_and_jac(u, jnp.ones_like(mask))
+        # One evaluation at the result: the model's flags do not depend on the mask.
+        r, Jw, ok = r_and_jac(u, jnp.ones_like(mask))
         # J is of the residual (target − model)/σ; the model's is its negative.
         Jw = -Jw / sc[None, :]
         res = r.reshape(-1, 3) * sigma[:, None]
@@ -270,17 +245,19 @@ class SuperModel:
     def _call(self, start, sel, mask, target, sigma, fit: bool, max_steps: int = MAX_STEPS):
         fn = self._compiled()
         scale = jnp.asarray(self.scale)
-        return _chunks(
+        out = map_in_chunks(
             lambda P0, SEL, M, T, S: fn(
                 self.robot, self.design, scale, P0, SEL, M, T, S, jnp.asarray(fit), max_steps
             ),
             start.shape[0],
+            CHUNK,
             start,
             sel,
             mask,
             target,
             sigma,
         )
+        return tuple(np.asarray(x) for x in out)
 
     def _default_sel(self, B: int, chosen=()) -> np.ndarray:
         """Slot indices: the `chosen` candidate parameters, padded with other distinct

@@ -1,5 +1,6 @@
 """Compensation of a whole path: input checks on the host, one jitted vmapped program
-over the rows, refusals named by row, and the commands file.
+over chunks of rows (one compile for every path length), refusals named by row, and
+the commands file.
 
 A path is a data-format CSV without deflection columns: per row the programmed angles
 `q1_deg … q6_deg` and the process wrench `fx_N … mz_Nm` at the tool point (base frame).
@@ -16,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._batching import map_in_chunks
 from .._calibration import Calibration
 from .._io import Dataset, atomic_text_file, input_cells, read_dataset
 from .._robot import Robot
@@ -23,6 +25,10 @@ from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
 
 __all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
+
+#: Rows per call of the compiled path program (paths are padded to a multiple, so one
+#: compile serves every path length).
+CHUNK_ROWS = 16
 
 #: Columns a commands file adds to the path's own.
 COMMAND_COLUMNS = (
@@ -155,8 +161,14 @@ def compensate(
         if cov.shape != (P, P):
             raise ValueError(f"calibration covariance must be {P}x{P}, got {cov.shape}")
     moment = path.moment if path.has_moments else None
-    rows = _batch(
-        robot, path.q, path.force, moment, cov, float(max_cond), float(length_scale), float(tol)
+    settings = (float(max_cond), float(length_scale), float(tol))
+    rows = map_in_chunks(
+        lambda q, f, m: _batch(robot, q, f, m, cov, *settings),
+        len(path),
+        CHUNK_ROWS,
+        path.q,
+        path.force,
+        moment,
     )
     limits = tuple((float(lo), float(hi)) for lo, hi in np.rad2deg(np.asarray(robot.joint_limits)))
     return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)

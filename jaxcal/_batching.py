@@ -1,0 +1,36 @@
+"""Fixed-size chunks over a leading batch axis, so that one compiled program serves
+every batch size.
+
+A jitted, vmapped program is compiled for the exact shapes it sees: a path of 12 rows
+and one of 20, or 57 fits and 60, would each cost a compile of minutes on a small
+machine. Calling it on chunks of one size (the last padded with copies of member 0,
+whose results are dropped) trades a little padded work for one compile.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["map_in_chunks"]
+
+
+def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -> Any:
+    """`fn(*arrays)` computed on chunks of `chunk` members along the leading axis of
+    every array (`None` passes through), outputs concatenated along their leading axis
+    and cut to `size`. `fn` must map a batch of `chunk` members to a pytree whose array
+    leaves have that batch axis first."""
+    if size < 1:
+        raise ValueError(f"nothing to compute: batch size {size}")
+    pad = (-size) % chunk
+    idx = np.concatenate([np.arange(size), np.zeros(pad, int)])
+    arrays = tuple(None if a is None else jnp.asarray(a)[idx] for a in arrays)
+    outs = [
+        fn(*(None if a is None else a[i : i + chunk] for a in arrays))
+        for i in range(0, size + pad, chunk)
+    ]
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *outs)
