@@ -18,9 +18,10 @@ missing effect, add it, show the gap shrink.
    score; not at the linearised step: the compensator parameters are weakly determined,
    and a linear step along them can overshoot into a region from which the fit does not
    return (measured with 64 LM steps on hidden joint-2 nonlinearity: named in 4 of 10
-   seeds from the linear step, 10 of 10 from the optimum). A fit that runs out of steps
-   is continued once (`ROUNDS`); one that still has not met the tolerances counts with
-   its χ², which bounds the candidate's minimum from above (conservative for ΔBIC).
+   seeds from the linear step, 10 of 10 from the optimum). A fit has a budget of
+   `max_steps` LM steps (fits along the flat (Kc, Kc·s0) valley of a joint-2 dead band
+   need 70–130); one that has not met the tolerances within it counts with its χ²,
+   which bounds the candidate's minimum from above (conservative for ΔBIC).
 
 Hidden effects are sized in the tests and the notebook by the *gap they leave* after
 the nominal refit (largest row 5 σ), not by their raw size: what the re-identified
@@ -70,10 +71,6 @@ __all__ = [
     "DECISIVE_BIC",
 ]
 
-#: Calls of `max_steps` LM steps a fit may take (`SuperModel.fit`'s `rounds`): fits
-#: along the flat (Kc, Kc·s0) valley of a joint-2 dead band need 70–130 steps.
-ROUNDS = 2
-
 
 # -- the workflow --------------------------------------------------------------------------
 
@@ -120,7 +117,7 @@ def discover_batch(
     say("fitting the nominal model")
     free0 = np.zeros(len(sm.names), bool)
     free0[: sm.n_nominal] = True
-    nom = sm.fit(sm.start, free0, deflections, sigma, max_steps=max_steps, rounds=ROUNDS)
+    nom = sm.fit(sm.start, free0, deflections, sigma, max_steps=max_steps)
     # Jacobian w.r.t. every parameter at the nominal optimum, for the score screening.
     nom_jac = sm.jacobian(nom.params, sigma)
 
@@ -164,7 +161,6 @@ def discover_batch(
         targets_a,
         sigmas_a,
         max_steps=max_steps,
-        rounds=ROUNDS,
     )
     refined = {o: j for j, o in enumerate(owner)}
 
@@ -179,9 +175,8 @@ def discover_batch(
         if best.eligible
     ]
     say("held-out residuals (leave one configuration out)")
-    kw = dict(max_steps=max_steps, rounds=ROUNDS)
-    held_nom = heldout_residuals(sm, nom, list(range(S)), deflections, sigma, **kw)
-    held = heldout_residuals(sm, fits, best_fits, targets_a, sigmas_a, **kw)
+    held_nom = heldout_residuals(sm, nom, list(range(S)), deflections, sigma, max_steps)
+    held = heldout_residuals(sm, fits, best_fits, targets_a, sigmas_a, max_steps)
 
     reports = [
         _report(sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held)
@@ -354,6 +349,7 @@ def discover(
     - `data`: a data set with measured deflections and σ.
     - `candidates`: the effects to try (default `default_candidates(robot)`).
     - `refine`: how many of the best-screened candidates get a full nonlinear fit.
+    - `max_steps`: Levenberg–Marquardt step budget of each fit (`SuperModel.fit`).
 
     Returns a `DiscoveryReport`: the effect in words with its fitted parameters ± std,
     the gap before and after (RMS, χ²_red, ΔBIC, held-out RMS), every candidate's ΔBIC,

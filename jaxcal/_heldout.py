@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._supermodel import BatchFit, SuperModel
+from ._supermodel import MAX_STEPS, BatchFit, SuperModel
 
 __all__ = ["LEVERAGE_MAX", "heldout_residuals", "press"]
 
@@ -57,9 +57,7 @@ def heldout_residuals(
     members: list[int],
     targets: np.ndarray,
     sigma: np.ndarray,
-    *,
-    max_steps: int,
-    rounds: int = 1,
+    max_steps: int = MAX_STEPS,
 ) -> dict[int, np.ndarray]:
     """Held-out residuals (n, 3) m of the fits `members` of `fits` to `targets`
     (B, n, 3) m with `sigma` (B, n) m, per configuration `sm.groups`: PRESS where the
@@ -79,9 +77,7 @@ def heldout_residuals(
     sig = sigma[js].copy()
     for k, (_, g) in enumerate(todo):
         sig[k][groups == g] = _LEFT_OUT_SIGMA
-    refit = sm.fit(
-        fits.params[js], fits.free[js], targets[js], sig, max_steps=max_steps, rounds=rounds
-    )
+    refit = sm.fit(fits.params[js], fits.free[js], targets[js], sig, max_steps=max_steps)
     for k, (j, g) in enumerate(todo):
         rows = groups == g
         # A refit need not be well posed (the configuration may be the only one that

@@ -2,6 +2,7 @@
 explicitly (the library never flips global JAX config on import)."""
 
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -18,6 +19,17 @@ def pytest_configure(config):
     # user's own cache.
     if not hasattr(config, "workerinput"):
         os.environ["JAXCAL_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxcal-test-cache-")
+    # The test processes use it too, as a user's command line and notebooks do: a
+    # program compiled by one test file is read back, not compiled again, by another
+    # worker or a notebook. It starts empty, so every program is still compiled once.
+    import jaxcal
+
+    jaxcal.enable_compilation_cache()
+
+
+def pytest_unconfigure(config):
+    if not hasattr(config, "workerinput"):
+        shutil.rmtree(os.environ.get("JAXCAL_CACHE_DIR", ""), ignore_errors=True)
 
 
 DATA = Path(__file__).parent / "data"

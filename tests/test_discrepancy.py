@@ -289,7 +289,7 @@ def dead_band(robot, example, study):
     start[sm.slices[i]] = hidden["backlash[2]"][1]
     target = hidden["backlash[2]"][0]
     sigma = np.full((1, sm.n), STUDY.SIGMA)
-    fit = sm.fit(start, candidate_free(sm, i), target, sigma, rounds=2)
+    fit = sm.fit(start, candidate_free(sm, i), target, sigma)
     return sm, cands, i, fit, target, sigma, ex
 
 
@@ -305,7 +305,7 @@ def test_heldout_matches_refitting_without_each_configuration(dead_band):
     cols = np.flatnonzero(fit.free[0])
     _, lev = press(fit.jac[0][:, cols], (fit.residuals[0] / STUDY.SIGMA).reshape(-1), sm.groups)
     assert lev.max() > LEVERAGE_MAX  # the case the refits are for
-    held = heldout_residuals(sm, fit, [0], target, sigma, max_steps=64, rounds=2)[0]
+    held = heldout_residuals(sm, fit, [0], target, sigma)[0]
     G = int(sm.groups.max()) + 1
     sig = np.repeat(sigma, G, axis=0)
     for g in range(G):
@@ -315,7 +315,6 @@ def test_heldout_matches_refitting_without_each_configuration(dead_band):
         np.repeat(fit.free, G, axis=0),
         np.repeat(target, G, axis=0),
         sig,
-        rounds=2,
     )
     exact = np.zeros_like(held)
     for g in range(G):
