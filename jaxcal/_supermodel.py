@@ -5,12 +5,12 @@ screening Jacobians.
 Every candidate is "absent" at parameter value 0, so the nominal model *is* the super
 model with all candidate parameters at 0, and a candidate fit frees the nominal
 parameters plus that candidate's. Fits are optimistix Levenberg–Marquardt
-(`optx.least_squares`, `SmallQR` linear solves) on the full equilibrium model, with the
-derivatives of `jaxcal._identification`'s full-model predictor (implicit-function
-derivatives whose linear solve never raises), `jax.vmap`-ed over a batch of fits
-(seeds × candidates). Which parameters a fit frees is *traced* (indices of `SLOTS`
-candidate parameters and a 0/1 mask), so one compile per robot structure and design
-shape serves everything.
+(`optx.least_squares`, `SmallQR` linear solves) on the full equilibrium model
+(`jaxcal._equilibrium.measured_deflections`, the predictor identify uses too:
+implicit-function derivatives whose linear solve never raises), `jax.vmap`-ed over a
+batch of fits (seeds × candidates; `chunk_size()` members per call). Which parameters
+a fit frees is *traced* (indices of `SLOTS` candidate parameters and a 0/1 mask), so
+one compile per robot structure and design shape serves everything.
 
 Why not `jaxcal._lsq.nonlinear_fit`: its free set is static (one compile per candidate,
 ~17, each minutes on two cores) and its compiled program holds four copies of the model
