@@ -30,6 +30,7 @@ from ._robot import G, Robot
 __all__ = [
     "Equilibrium",
     "measured_deflections",
+    "with_unloaded",
     "total_potential",
     "equilibrium",
     "deflection",
@@ -310,7 +311,7 @@ def measured_deflections(
     force_all: Float[Array, "m 3"],
     moment_all: Float[Array, "m 3"] | None,
     inverse: Int[Array, " n"],
-) -> tuple[Float[Array, "n 3"], Bool[Array, " n"], Float[Array, "m ndof"]]:
+) -> tuple[Float[Array, "n 3"], Bool[Array, " n"]]:
     """The measured quantity (loaded minus unloaded tool point, then the observation
     effects) of `n` rows of a design with the full model, differentiable in `robot` by
     forward mode, never raising.
@@ -323,8 +324,8 @@ def measured_deflections(
     batch's slowest solve still takes 3 Newton steps instead of 4, and the extra solve
     ate the gain.)
 
-    Returns `(dp (n, 3) m, ok (n,), roots (m, ndof))`; a row whose equilibria failed is
-    `FAILED_DEFLECTION` in `dp` and `False` in `ok`.
+    Returns `(dp (n, 3) m, ok (n,))`; a row whose equilibria failed is
+    `FAILED_DEFLECTION` in `dp` and `False` in `ok`. `with_unloaded` builds the inputs.
     """
     n = inverse.shape[0]
     xs, conv = batch_roots(stop_gradients(robot), q_all, force_all, moment_all)
@@ -340,4 +341,15 @@ def measured_deflections(
     dp = pt[:n] - pt[n:][inverse]
     dp = jax.vmap(lambda q, f, d: observe_effects(robot, q, f, d))(q_all[:n], force_all[:n], dp)
     ok = oks[:n] & oks[n:][inverse] & jnp.all(jnp.isfinite(dp), axis=1)
-    return jnp.where(ok[:, None], dp, FAILED_DEFLECTION), ok, xs
+    return jnp.where(ok[:, None], dp, FAILED_DEFLECTION), ok
+
+
+def with_unloaded(q, force, moment, q_unique):
+    """`(q_all, force_all, moment_all)` as `measured_deflections` takes them: the rows
+    followed by their distinct configurations `q_unique` at zero load (`moment` may be
+    `None`)."""
+    zeros = jnp.zeros((q_unique.shape[0], 3), jnp.result_type(force))
+    q_all = jnp.concatenate([jnp.asarray(q), jnp.asarray(q_unique, jnp.result_type(q))])
+    f_all = jnp.concatenate([jnp.asarray(force), zeros])
+    m_all = None if moment is None else jnp.concatenate([jnp.asarray(moment), zeros])
+    return q_all, f_all, m_all

@@ -25,7 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._compensator import compensator_stiffness
-from ._equilibrium import measured_deflections
+from ._equilibrium import measured_deflections, with_unloaded
 from ._ident_result import IdentificationResult, free_mask, make_result, resolve_name
 from ._io import Dataset
 from ._lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
@@ -156,16 +156,11 @@ def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=Non
     `data.q` is concrete)."""
     if q_unique is None or inverse is None:
         q_unique, inverse = _unique_rows(data.q)
-    use_m = _has_moments(data)
-    zeros = jnp.zeros((q_unique.shape[0], 3), data.force.dtype)
-    q_all = jnp.concatenate([jnp.asarray(data.q), jnp.asarray(q_unique, data.q.dtype)])
-    f_all = jnp.concatenate([data.force, zeros])
-    m_all = jnp.concatenate([data.moment, zeros]) if use_m else None
+    moment = data.moment if _has_moments(data) else None
+    q_all, f_all, m_all = with_unloaded(data.q, data.force, moment, q_unique)
 
     def predict(p):
-        r = set_parameters(robot, p)
-        dp, ok, _ = measured_deflections(r, q_all, f_all, m_all, inverse)
-        return dp, ok
+        return measured_deflections(set_parameters(robot, p), q_all, f_all, m_all, inverse)
 
     return predict
 

@@ -30,7 +30,7 @@ from jaxtyping import Array, Float
 from ._batching import map_in_chunks
 from ._candidates import Candidate
 from ._dense import SmallQR
-from ._equilibrium import measured_deflections
+from ._equilibrium import measured_deflections, with_unloaded
 from ._io import Dataset
 from ._robot import URAD, Robot
 
@@ -145,15 +145,8 @@ class SuperModel:
         inv = configuration_groups(data.q)
         first = np.array([np.flatnonzero(inv == g)[0] for g in range(inv.max() + 1)])
         self.groups = inv
-        # Rows then their distinct configurations (zero load), as `measured_deflections`
-        # takes them.
-        zeros = np.zeros((len(first), 3))
-        self.design = (
-            jnp.asarray(np.concatenate([np.asarray(data.q), np.asarray(data.q)[first]])),
-            jnp.asarray(np.concatenate([np.asarray(data.force), zeros])),
-            jnp.asarray(np.concatenate([np.asarray(data.moment), zeros])),
-            jnp.asarray(inv),
-        )
+        q_unique = jnp.asarray(np.asarray(data.q)[first])
+        self.design = (*with_unloaded(data.q, data.force, data.moment, q_unique), jnp.asarray(inv))
 
     # -- the model ---------------------------------------------------------------------
 
@@ -173,8 +166,7 @@ class SuperModel:
         flag, not an exception under `vmap`)."""
         q_all, force_all, moment_all, inv = design
         m_all = moment_all if self.use_moment else None
-        dp, ok, _ = measured_deflections(self.to_robot(p, robot), q_all, force_all, m_all, inv)
-        return dp, ok
+        return measured_deflections(self.to_robot(p, robot), q_all, force_all, m_all, inv)
 
     def _compiled(self):
         if self._key not in _COMPILED:
