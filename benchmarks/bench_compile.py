@@ -31,10 +31,13 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal import _identify as ident  # noqa: E402
-from jaxcal._identification import linear_system, solve_linear_jit  # noqa: E402
-from jaxcal._two_step import solve_two_step_jit, two_step_system  # noqa: E402
-from jaxcal.compensation._path import _batch as compensate_batch  # noqa: E402
+from jaxcal import linear_system, two_step_system  # noqa: E402
+from jaxcal.internal import (  # noqa: E402
+    compensate_rows as compensate_batch,
+    nonlinear_jit,
+    solve_linear_jit,
+    solve_two_step_jit,
+)
 
 DATA = Path(__file__).parent.parent / "tests" / "data" / "example_calibration.csv"
 
@@ -125,7 +128,7 @@ def main():
     rows = [
         stages(
             "identify nonlinear (48 rows)",
-            ident._nonlinear_jit,
+            nonlinear_jit,
             robot,
             data,
             jnp.asarray(u),

@@ -44,9 +44,14 @@ from scipy.linalg import solve_triangular  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal._constraints import constraint_values, design_bounds  # noqa: E402
-from jaxcal._design import DesignProblem, design_objective, optimise_design  # noqa: E402
-from jaxcal._plans import random_designs  # noqa: E402
+from jaxcal import (  # noqa: E402
+    DesignProblem,
+    constraint_values,
+    design_bounds,
+    design_objective,
+    optimise_design,
+    random_designs,
+)
 
 # --- plain numpy implementation of the same criterion (the baseline) -----------------
 URAD = 1e-6

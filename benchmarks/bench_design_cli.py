@@ -22,8 +22,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal._design import _pool_values  # noqa: E402
-from jaxcal._design_problem import DesignProblem  # noqa: E402
+from jaxcal import DesignProblem  # noqa: E402
+from jaxcal.internal import pool_values  # noqa: E402
 
 CASES = {
     "default (aggregated, trace, full model)": (
@@ -57,7 +57,7 @@ def main() -> None:
         res = json.loads(out.stdout)
         P = DesignProblem(robot, 12, **problem)
         rand = jaxcal.random_designs(robot, 200, 12, seed=0, **sampling)
-        v = np.asarray(_pool_values(P, jnp.asarray(rand)))
+        v = np.asarray(pool_values(P, jnp.asarray(rand)))
         rows.append(
             [
                 label,

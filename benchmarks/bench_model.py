@@ -29,7 +29,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal._robot import G  # noqa: E402
+from jaxcal.internal import G  # noqa: E402
 
 # ------------------------------------------------------------------ the numpy model
 

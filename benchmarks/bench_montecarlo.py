@@ -37,7 +37,8 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal._montecarlo import _prepare, run_study, trial_noise  # noqa: E402
+from jaxcal import trial_noise  # noqa: E402
+from jaxcal.internal import prepare_study, run_study  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SIGMA = 2e-5
@@ -174,7 +175,7 @@ class NumpyTwoStep:
     a forward-difference Jacobian (finite differences only in this baseline)."""
 
     def __init__(self, sys):
-        from jaxcal._robot import URAD
+        from jaxcal.internal import URAD
 
         self.urad = URAD
         f = sys.factor
@@ -286,7 +287,7 @@ def main() -> None:
     }
 
     # ---- linear
-    tf, d0, sigma, _ = _prepare(robot, design, "linear", None, None, SIGMA)
+    tf, d0, sigma, _ = prepare_study(robot, design, "linear", None, None, SIGMA)
     cache: dict = {}
     r = run_study(tf, d0, sigma, method="linear", trials=n_lin, chunk=chunk, cache=cache)
     compile_lin = r.compile_seconds
@@ -294,7 +295,7 @@ def main() -> None:
         lambda: run_study(tf, d0, sigma, method="linear", trials=n_lin, chunk=chunk, cache=cache)
     )
     # numpy: the same weighted linear system, from the jaxcal linear system's design.
-    from jaxcal._identification import linear_system
+    from jaxcal import linear_system
 
     sys_ = linear_system(robot, design.with_deflection(d0))
     X = np.asarray(sys_.factor.design)
@@ -338,9 +339,9 @@ def main() -> None:
     }
 
     # ---- two-step
-    from jaxcal._two_step import two_step_system
+    from jaxcal import two_step_system
 
-    tf2, d02, sigma2, _ = _prepare(robot, design, "two-step", None, None, SIGMA)
+    tf2, d02, sigma2, _ = prepare_study(robot, design, "two-step", None, None, SIGMA)
     n2 = n_lin // 16
     cache2: dict = {}
     r2 = run_study(tf2, d02, sigma2, method="two-step", trials=n2, chunk=4096, cache=cache2)
@@ -381,7 +382,7 @@ def main() -> None:
 
     # ---- nonlinear
     try:
-        tfn, d0n, sigman, _ = _prepare(robot, design, "nonlinear", None, None, SIGMA)
+        tfn, d0n, sigman, _ = prepare_study(robot, design, "nonlinear", None, None, SIGMA)
         cachen: dict = {}
         # The first call compiles (timed separately) and then runs all trials once;
         # its `seconds` is the run alone.

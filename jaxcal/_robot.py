@@ -10,16 +10,15 @@ import json
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._effects import AbstractEffect
-
 __all__ = [
+    "AbstractEffect",
     "Robot",
     "Experiment",
     "load_robot",
@@ -36,6 +35,43 @@ _BODIES = ("link2", "link3", "crank", "wrist")
 _GEOMETRY_KEYS = ("d1", "a1", "a2", "a3", "d4", "d6")
 URAD = 1e-6  # rad per µrad
 G = 9.80665  # m/s², standard gravity (spec: robot.md)
+
+
+class AbstractEffect(eqx.Module):
+    """Base class of a model extension. Override what the effect needs.
+
+    `n_dof` (class variable): number of extra deflection variables ξ (rad).
+    """
+
+    n_dof: ClassVar[int] = 0
+
+    def sites(self, robot: Robot, xi: Float[Array, " n"]) -> dict[str, Float[Array, 3]]:
+        """Rotation vectors (rad) at kinematic sites, from this effect's ξ."""
+        return {}
+
+    def energy(
+        self, robot: Robot, q: Float[Array, 6], theta: Float[Array, 6], xi: Float[Array, " n"]
+    ) -> Float[Array, ""]:
+        """Extra potential energy (J), e.g. the springs of ξ."""
+        return jnp.zeros((), theta.dtype)
+
+    def joint_energy(
+        self, robot: Robot, theta: Float[Array, 6], energy: Float[Array, 6]
+    ) -> Float[Array, 6]:
+        """Per-joint spring energies (J) given those so far (default ½θ²/k): return them
+        modified for joints whose spring law this effect changes."""
+        return energy
+
+    def observe(
+        self, robot: Robot, q: Float[Array, 6], force: Float[Array, 3], dp: Float[Array, 3]
+    ) -> Float[Array, 3]:
+        """The measured deflection (m) given the model's `dp` (m, base frame): an
+        observation-level effect (e.g. a rotated tracker frame). Default: unchanged."""
+        return dp
+
+    def dof_scale(self, robot: Robot) -> Float[Array, " n"]:
+        """A compliance (rad/(N·m)) per ξ, to scale Newton's residual; rough is fine."""
+        return jnp.full((self.n_dof,), 1e-6)
 
 
 class Experiment(eqx.Module):

@@ -71,8 +71,7 @@ def hidden_data(robot, data, cases, seeds, *, max_sigma=MAX_SIGMA, perturbed=Fal
     are the file's (times `TRUE_FACTORS` if `perturbed`). Each effect is scaled so
     that its gap (`gap_sizes`) is `max_sigma`; the compensator case hides the preset's
     spring, scaled likewise."""
-    from jaxcal._candidates import default_candidates
-    from jaxcal._supermodel import SuperModel
+    from jaxcal import SuperModel, default_candidates
 
     nominal = no_compensator(robot) if "compensator" in cases else robot
     cands = default_candidates(nominal)
@@ -125,7 +124,7 @@ TEST_SEEDS = range(3)
 def run_study(robot, data, cases=CASES, seeds=range(10), progress=None, perturbed=False):
     """Per case, the list of (effect label or "none") named for each seed and the
     reports. Cases that share a nominal robot run through one `discover_batch` call."""
-    from jaxcal._discrepancy import discover_batch
+    from jaxcal import discover_batch
 
     data = study_design(data)
     groups = [[c for c in cases if c != "compensator"], [c for c in cases if c == "compensator"]]

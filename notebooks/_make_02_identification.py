@@ -19,7 +19,7 @@ cells = [
         "import jaxcal\n"
         "jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)\n"
         "%matplotlib inline\nimport json\nimport numpy as np\nimport matplotlib.pyplot as plt\n"
-        "import jaxcal\nfrom jaxcal._identify import identify\nfrom jaxcal._cli import format_table",
+        "import jaxcal\nfrom jaxcal import identify\nfrom jaxcal import format_table",
     ),
     (
         "code",
@@ -95,7 +95,7 @@ cells = [
     ),
     (
         "code",
-        "from jaxcal._two_step import fit_two_step\n"
+        "from jaxcal import fit_two_step\n"
         "own = data.with_deflection(jax.vmap(lambda q, f: jaxcal.linear_deflection(robot, q, f)[:3])"
         "(data.q, data.force))\nfor exact in (True, False):\n"
         "    r = fit_two_step(robot, own, exact=exact)\n"

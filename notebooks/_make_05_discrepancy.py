@@ -31,9 +31,9 @@ import json, time
 import numpy as np
 import matplotlib.pyplot as plt
 import jaxcal
-from jaxcal._candidates import default_candidates
-from jaxcal._discrepancy import discover
-from jaxcal._supermodel import SuperModel
+from jaxcal import default_candidates
+from jaxcal import discover
+from jaxcal import SuperModel
 
 robot = jaxcal.load_robot()
 design = jaxcal.read_dataset("../tests/data/example_calibration.csv", robot)
@@ -211,7 +211,7 @@ every configuration whose leverage exceeds 0.5 instead.""",
     ),
     (
         "code",
-        """from jaxcal._screening import PRELOAD_FACTORS
+        """from jaxcal.internal import PRELOAD_FACTORS
 b2 = study["truth"]["backlash[2]"][0]  # µrad, the study's joint-2 dead band
 j2 = [c.label for c in cands].index("backlash[2]")
 P = np.tile(sm.start, (len(PRELOAD_FACTORS), 1))

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal._cli import main
-from jaxcal.internal import make_result
+from jaxcal.internal import main, make_result
 
 EXAMPLE = "example_calibration.csv"
 

@@ -13,8 +13,7 @@ from pathlib import Path
 import pytest
 
 import jaxcal
-from jaxcal._cli import main
-from jaxcal.internal import cache_info, clear_cache
+from jaxcal.internal import cache_info, clear_cache, main
 
 
 def test_cache_dir_resolution(monkeypatch, tmp_path):

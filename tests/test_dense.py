@@ -1,4 +1,4 @@
-"""`jaxcal._dense` (LAPACK-free small linear algebra) against numpy's LAPACK, plus
+"""`jaxcal._linalg.dense` (LAPACK-free small linear algebra) against numpy's LAPACK, plus
 gradients, vmap and the lineax solver plumbing."""
 
 import jax
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from jaxcal import _dense as D
+from jaxcal.internal import dense as D
 
 sizes = st.integers(min_value=1, max_value=10)
 seeds = st.integers(min_value=0, max_value=2**31 - 1)

@@ -12,11 +12,19 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal._constraints import constraint_values, design_bounds, design_loads
-from jaxcal._criteria import design_criteria
-from jaxcal._design import DesignProblem, design_objective, optimise_design
-from jaxcal._observation import observation_linear
-from jaxcal._plans import feasible_q3_range, random_designs, structured_design
+from jaxcal import (
+    DesignProblem,
+    constraint_values,
+    design_bounds,
+    design_criteria,
+    design_loads,
+    design_objective,
+    feasible_q3_range,
+    observation_linear,
+    optimise_design,
+    random_designs,
+    structured_design,
+)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +59,7 @@ def test_aggregated_matches_numpy_reference(robot, designs):
 def test_physical_linearisation_matches_finite_differences(robot, designs):
     # ∂Δp/∂(k2, Kc, s0) of the linear model with the compensator aggregated (eq. 10),
     # against central differences of jaxcal.linear_deflection in the parameters.
-    from jaxcal._design_observation import design_observation
+    from jaxcal import design_observation
 
     q = jnp.asarray(designs[1][:3])
     F = jnp.asarray(_vertical(robot, 3))
@@ -128,8 +136,8 @@ def test_full_model_criterion_value_and_gradient(robot, designs):
     # equilibrium model), and the criterion's gradient in q (second-order autodiff
     # through the implicit function theorem) agrees with central differences. 3
     # configurations keep the run short (the compile cost hardly depends on m).
-    from jaxcal._criteria import criteria_from_observation
-    from jaxcal._design_observation import design_observation
+    from jaxcal import design_observation
+    from jaxcal.internal import criteria_from_observation
 
     q = jnp.asarray(designs[5][:3])
     F = jnp.asarray(_vertical(robot, 3))
@@ -248,7 +256,7 @@ def optimised(robot):
 
 
 def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised):
-    from jaxcal._design import _pool_values
+    from jaxcal.internal import pool_values
 
     d = optimised
     assert d.feasible and d.model == "full"
@@ -257,7 +265,7 @@ def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised
     # The reference: the best of the 200 random designs under the same (full-model)
     # criterion, the best one re-evaluated through `design_criteria`'s own path.
     P = DesignProblem(robot, 12, parameters="physical")
-    rand = np.asarray(_pool_values(P, jnp.asarray(designs)))
+    rand = np.asarray(pool_values(P, jnp.asarray(designs)))
     assert d.random_best == pytest.approx(rand.min(), rel=1e-12)
     F = _vertical(robot, 12)
     best_random = design_criteria(robot, designs[int(np.argmin(rand))], F, parameters="physical")
@@ -311,7 +319,7 @@ def test_aggregated_design_at_most_half_of_random(robot):
 
 
 def test_cli_design_and_evaluate(tmp_path, capsys):
-    from jaxcal._cli import main
+    from jaxcal.internal import main
 
     out = tmp_path / "design.csv"
     rc = main(
@@ -379,10 +387,10 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
 
 
 def test_screw_jacobian_and_focus(robot, designs):
-    from jaxcal._design_observation import _screw_jacobian
+    from jaxcal.internal import screw_jacobian
 
     qs = jnp.asarray(designs[4])
-    a = jax.jit(jax.vmap(lambda q: _screw_jacobian(robot, q)))(qs)
+    a = jax.jit(jax.vmap(lambda q: screw_jacobian(robot, q)))(qs)
     b = jax.jit(jax.vmap(lambda q: jaxcal.jacobian_theta(robot, q)))(qs)
     np.testing.assert_allclose(a, b, atol=1e-12)
     F = _vertical(robot, 12)

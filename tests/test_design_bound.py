@@ -12,12 +12,8 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal._criteria import design_criteria
-from jaxcal._design import _pool_values
-from jaxcal._design_bound import design_bound
-from jaxcal._design_observation import design_observation
-from jaxcal._design_problem import DesignProblem, _criteria
-from jaxcal._plans import random_designs
+from jaxcal import DesignProblem, design_bound, design_criteria, design_observation, random_designs
+from jaxcal.internal import pool_values, problem_criteria
 
 
 def _numpy_phi(robot, P, bound):
@@ -63,7 +59,9 @@ def test_bound_is_certified_and_below_every_design_on_its_pool(robot, criterion)
     rng = np.random.default_rng(0)
     picks = np.stack([rng.choice(b.pool_size, m, replace=False) for _ in range(200)])
     values = np.asarray(
-        jax.jit(jax.vmap(lambda q: _criteria(P, q).value(criterion)))(jnp.asarray(b.q[picks]))
+        jax.jit(jax.vmap(lambda q: problem_criteria(P, q).value(criterion)))(
+            jnp.asarray(b.q[picks])
+        )
     )
     assert np.all(b.value <= values)
     # ... and nearly attained by the weighted design (gap < 1 %): the best of 200
@@ -74,7 +72,7 @@ def test_bound_is_certified_and_below_every_design_on_its_pool(robot, criterion)
 def test_default_design_efficiency_and_gain_over_random(robot, capsys):
     # The default problem of `jaxcal design --configs 12`: aggregated set, trace, full
     # model, 3 q2 levels at least 20° apart, vertical loads.
-    from jaxcal._cli import main
+    from jaxcal.internal import main
 
     assert main(["design", "--configs", "12", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
@@ -97,13 +95,15 @@ def test_default_design_efficiency_and_gain_over_random(robot, capsys):
 
 
 def test_repeats_divide_the_covariance_and_fill_the_design_file(robot, tmp_path, capsys):
-    from jaxcal._cli import main
+    from jaxcal.internal import main
 
     q = random_designs(robot, 1, 4, seed=5, groups=(0, 1, 2, 0))[0]
     F = np.tile([0.0, 0.0, -robot.experiment.max_load], (12, 1))
     P = DesignProblem(robot, 4, groups=(0, 1, 2, 0), model="linear", repeats=3)
     rep = design_criteria(robot, np.repeat(q, 3, 0), F, model="linear")
-    assert float(_criteria(P, jnp.asarray(q)).trace) == pytest.approx(float(rep.trace), rel=1e-10)
+    assert float(problem_criteria(P, jnp.asarray(q)).trace) == pytest.approx(
+        float(rep.trace), rel=1e-10
+    )
     out = tmp_path / "rep.csv"
     args = ["design", "--distinct", "4", "--repeats", "3", "--groups", "2", "--model", "linear"]
     rc = main(
@@ -120,7 +120,7 @@ def test_explicit_list_on_the_linear_model_beats_random(robot, capsys):
     # `jaxcal design --configs 12 --model linear --parameters k2,k3,k4,k5,k6`: the
     # criterion is the marginal trace of those five (Kc, s0 still estimated);
     # benchmarks/README.md has its wall time.
-    from jaxcal._cli import main
+    from jaxcal.internal import main
 
     rc = main(
         ["design", "--configs", "12", "--model", "linear", "--parameters", "k2,k3,k4,k5,k6"]
@@ -135,9 +135,9 @@ def test_explicit_list_on_the_linear_model_beats_random(robot, capsys):
         robot, 12, parameters="physical", focus=("k2", "k3", "k4", "k5", "k6"), model="linear"
     )
     rand = random_designs(robot, 200, 12, seed=0)
-    v = np.asarray(_pool_values(P, jnp.asarray(rand)))
+    v = np.asarray(pool_values(P, jnp.asarray(rand)))
     assert res["value"] == pytest.approx(
-        float(_criteria(P, jnp.asarray(np.deg2rad(res["configs_deg"]))).trace), rel=1e-8
+        float(problem_criteria(P, jnp.asarray(np.deg2rad(res["configs_deg"]))).trace), rel=1e-8
     )
     print(f"explicit list: ratio to the best of 200 random designs {res['value'] / v.min():.3f}")
     assert res["value"] <= 0.57 * v.min()

@@ -16,8 +16,7 @@ import pytest
 import scipy.stats
 
 import jaxcal
-from jaxcal._candidates import (
-    THETA_REF,
+from jaxcal import (
     Backlash,
     CompensatorSpring,
     JointNonlinearity,
@@ -25,9 +24,7 @@ from jaxcal._candidates import (
     TrackerRotation,
     default_candidates,
 )
-from jaxcal._discrepancy import chi2_sf
-from jaxcal._heldout import press
-from jaxcal._robot import URAD
+from jaxcal.internal import THETA_REF, URAD, chi2_sf, press
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -225,7 +222,7 @@ def test_gap_is_detected_before(study):
 
 def test_cli_discover_example_answers_none(data_dir, capsys, study):
     # (after the study: the compiled model is reused)
-    from jaxcal._cli import main
+    from jaxcal.internal import main
 
     rc = main(["discover", str(data_dir / "example_calibration.csv"), "--json"])
     out = json.loads(capsys.readouterr().out)
@@ -252,7 +249,7 @@ def test_cli_discover_example_answers_none(data_dir, capsys, study):
 
 def test_discover_rejects_float32_and_missing_deflections(robot, example):
     with pytest.raises(ValueError, match="no deflections"):
-        jaxcal_discover = __import__("jaxcal._discrepancy", fromlist=["discover"]).discover
+        jaxcal_discover = __import__("jaxcal.discrepancy._discover", fromlist=["discover"]).discover
         jaxcal_discover(robot, example.with_deflection(None))
 
 
@@ -277,8 +274,8 @@ def test_named_effect_size_is_recovered(study, case):
 def dead_band(robot, example, study):
     # (after the study: same robot structure and design, so the compiled model is reused)
     # One data set with a hidden joint-2 dead band and the candidate's fit from the truth.
-    from jaxcal._screening import candidate_free
-    from jaxcal._supermodel import SuperModel
+    from jaxcal import SuperModel
+    from jaxcal.internal import candidate_free
 
     ex = STUDY.study_design(example)
     nominal, hidden = STUDY.hidden_data(robot, ex, ["backlash[2]"], range(1))
@@ -298,7 +295,7 @@ def test_heldout_matches_refitting_without_each_configuration(dead_band):
     # one-step (PRESS) formula fails; `heldout_residuals` refits those. The result must
     # match refitting without each configuration, for all 16, to a small fraction of σ
     # (measured: ≤ 5e-4 mm RMS over 10 seeds, σ = 0.02 mm; here each row to 0.25 σ).
-    from jaxcal._heldout import LEVERAGE_MAX, heldout_residuals, press
+    from jaxcal.internal import LEVERAGE_MAX, heldout_residuals, press
 
     sm, cands, i, fit, target, sigma, _ = dead_band
     assert fit.valid[0] and fit.well[0]
@@ -324,8 +321,8 @@ def test_heldout_matches_refitting_without_each_configuration(dead_band):
 
 
 def test_preload_scan_only_for_joint_two_with_compensator(dead_band, robot):
-    from jaxcal._screening import preload_scan
-    from jaxcal._supermodel import SuperModel
+    from jaxcal import SuperModel
+    from jaxcal.internal import preload_scan
 
     sm, cands, i, fit, target, sigma, _ = dead_band
     drop, starts = preload_scan(sm, cands, fit, target, sigma)

@@ -10,15 +10,8 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal._identification import (
-    fit_linear,
-    fit_nonlinear,
-    full_model_predictor,
-    linear_system,
-    solve_linear,
-)
-from jaxcal._identify import identify
-from jaxcal._two_step import fit_two_step
+from jaxcal import fit_linear, fit_nonlinear, fit_two_step, identify, linear_system, solve_linear
+from jaxcal.internal import full_model_predictor
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +105,7 @@ def _calibration_plan(robot):
     ~76 % relative std and s0's mean z-score is −0.54 (coverage 89 %); spreading q2
     over five values and averaging 25 readings brings Kc to ~9 % and that bias to
     −0.04 ± 0.02 (2000 trials), so every parameter is well determined."""
-    from jaxcal._plans import structured_design
+    from jaxcal import structured_design
 
     e = robot.experiment
     q = np.rad2deg(structured_design(robot, [-30.0, 0.0, 30.0, 60.0, 90.0]))

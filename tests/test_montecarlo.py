@@ -23,10 +23,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import jaxcal
-from jaxcal._cli import main
-from jaxcal._mc_methods import TrialFit
-from jaxcal._mc_stats import MomentAccumulator
-from jaxcal._montecarlo import monte_carlo, run_study, trial_noise
+from jaxcal import monte_carlo, trial_noise
+from jaxcal.internal import MomentAccumulator, TrialFit, main, run_study
 
 SIGMA = 2e-5  # m, the canonical tracker noise (0.02 mm)
 ROOT = Path(__file__).resolve().parents[1]
@@ -123,7 +121,7 @@ _DEVICE_SCRIPT = textwrap.dedent(
     import jax
     jax.config.update("jax_enable_x64", True)
     import jaxcal
-    from jaxcal._montecarlo import monte_carlo
+    from jaxcal import monte_carlo
     robot = jaxcal.load_robot("fanuc_m900ib700")
     design = jaxcal.read_dataset(sys.argv[1], robot, ignore_deflection=True)
     r = monte_carlo(robot, design, trials=3001, chunk=1000, noise_std=2e-5, seed=5,

@@ -5,7 +5,7 @@ and the kernel splits its batch into tasks on that same pool and blocks on them.
 kernels at once on a 2-thread pool wait for each other forever (reproduced with jaxlib
 0.10.2: `model_deflections` on a 41×25 grid hung in 11 of 40 runs, stack in
 `ParallelBatchMap` of `lapack_dsyevd_ffi`). jaxcal's small systems therefore use
-`jaxcal._dense`; these tests read the lowered programs (StableHLO text) of every
+`jaxcal._linalg.dense`; these tests read the lowered programs (StableHLO text) of every
 vmapped path and fail on any LAPACK/BLAS custom call, so a `jnp.linalg` call slipping
 back in is caught deterministically, not by a flaky hang.
 """
@@ -20,10 +20,13 @@ import pytest
 from jax.sharding import Mesh
 
 import jaxcal
-from jaxcal import _dense
-from jaxcal._montecarlo import _make_chunk_fn, _prepare
-from jaxcal._plans import PAPER_TABLE5_DEG
-from jaxcal._simulate import _batch
+from jaxcal import PAPER_TABLE5_DEG
+from jaxcal.internal import (
+    batch_deflections,
+    dense as _dense,
+    make_chunk_fn as _make_chunk_fn,
+    prepare_study,
+)
 
 _LAPACK = re.compile(r"custom_call\s*@(\w*(?:lapack|blas|trsm|getrf|potrf|syevd|geqrf)\w*)")
 
@@ -49,7 +52,7 @@ def design(robot):
 
 
 def test_model_deflections_has_no_lapack(robot, design):
-    assert _lapack_calls(_batch.lower(robot, design.q, design.force, None)) == set()
+    assert _lapack_calls(batch_deflections.lower(robot, design.q, design.force, None)) == set()
 
 
 def test_observation_jacobian_has_no_lapack(robot, design):
@@ -72,7 +75,7 @@ def test_cartesian_compliance_has_no_lapack(robot, design):
 
 @pytest.mark.parametrize("method", ["linear", "two-step", "nonlinear"])
 def test_monte_carlo_chunk_has_no_lapack(robot, design, method):
-    tf, d0, sigma, _ = _prepare(robot, design, method, None, None, None)
+    tf, d0, sigma, _ = prepare_study(robot, design, method, None, None, None)
     mesh = Mesh(np.array(jax.devices()), ("trials",))
     fn = _make_chunk_fn(tf.fit, 4, mesh, None, False, None)
     n = d0.shape[0]

@@ -12,8 +12,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import jaxcal
-from jaxcal._constraints import CONSTRAINTS, constraint_values
-from jaxcal._kinematics import forward
+from jaxcal import CONSTRAINTS, constraint_values, forward
 
 
 def _eq12(l2, l3, q2p, q3):

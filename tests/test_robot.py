@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal._robot import URAD
+from jaxcal.internal import URAD
 
 
 @pytest.fixture(scope="module")
@@ -265,7 +265,7 @@ def test_serial_robot_phi3_relative(base):
     R3_s = jaxcal.forward(ser, q, th2).R3
     R3_p = jaxcal.forward(par, q, th2).R3
     # Serial: R3 = R1·Ry(−(q3 − θ2)) = R3_0·Ry(θ2).
-    Ry = jaxcal._kinematics.Ry
+    Ry = jaxcal.internal.Ry
     np.testing.assert_allclose(np.asarray(R3_s), np.asarray(R3_0 @ Ry(jnp.asarray(t))), atol=1e-15)
     np.testing.assert_allclose(np.asarray(R3_p), np.asarray(R3_0), atol=1e-15)
     # θ3 = θ2 restores the serial upper-arm orientation (φ3 = q3).

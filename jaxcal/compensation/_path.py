@@ -18,7 +18,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._batching import map_in_chunks
-from .._calibration import Calibration
+from .._identification.calibration import Calibration
 from .._io import Dataset, atomic_text_file, input_cells, read_dataset
 from .._robot import Robot
 from .._solution import RESULTS, messages
@@ -111,7 +111,7 @@ def read_path(path: str | Path, robot: Robot) -> Dataset:
 
 
 @eqx.filter_jit
-def _batch(robot, q, force, moment, covariance, max_cond, length_scale, tol):
+def compensate_rows(robot, q, force, moment, covariance, max_cond, length_scale, tol):
     one = lambda a, b, c: compensate_row(
         robot, a, b, c, covariance, max_cond=max_cond, length_scale=length_scale, tol=tol
     )
@@ -167,7 +167,7 @@ def compensate(
     moment = path.moment if path.has_moments else None
     settings = (float(max_cond), float(length_scale), float(tol))
     rows = map_in_chunks(
-        lambda q, f, m: _batch(robot, q, f, m, cov, *settings),
+        lambda q, f, m: compensate_rows(robot, q, f, m, cov, *settings),
         len(path),
         chunk_rows(),
         path.q,

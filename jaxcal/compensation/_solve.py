@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._dense import eigvalsh, lu_factor, lu_solve
-from .._equilibrium import (
+from .._linalg.dense import eigvalsh, lu_factor, lu_solve
+from .._model.equilibrium import (
     batch_roots,
     implicit_step,
     solve_equilibrium,

@@ -1,5 +1,45 @@
 """Names that tests, benchmarks and notebooks need but that are not part of the stable
-public API (as `lineax.internal`): they may change between versions."""
+public API (as `lineax.internal`): they may change between versions.
+
+This namespace sits above the library: it may reach the command line (`main`,
+`build_parser`), which nothing else in the library imports."""
 
 from .._cache import cache_info as cache_info, clear_cache as clear_cache
-from .._ident_result import make_result as make_result
+from .._cli.main import (
+    COMMANDS as COMMANDS,
+    build_parser as build_parser,
+    fix_names as fix_names,
+    main as main,
+)
+from .._identification.identify import nonlinear_jit as nonlinear_jit
+from .._identification.methods import (
+    full_model_predictor as full_model_predictor,
+    solve_linear_jit as solve_linear_jit,
+)
+from .._identification.result import make_result as make_result
+from .._identification.two_step import solve_two_step_jit as solve_two_step_jit
+from .._linalg import dense as dense
+from .._model.candidates import THETA_REF as THETA_REF
+from .._model.kinematics import Ry as Ry
+from .._model.simulate import batch_deflections as batch_deflections
+from .._robot import URAD as URAD, G as G
+from ..compensation._path import compensate_rows as compensate_rows
+from ..design._criteria import criteria_from_observation as criteria_from_observation
+from ..design._observation import screw_jacobian as screw_jacobian
+from ..design._optimise import pool_values as pool_values
+from ..design._problem import problem_criteria as problem_criteria
+from ..discrepancy._heldout import (
+    LEVERAGE_MAX as LEVERAGE_MAX,
+    heldout_residuals as heldout_residuals,
+    press as press,
+)
+from ..discrepancy._report import chi2_sf as chi2_sf
+from ..discrepancy._screening import (
+    PRELOAD_FACTORS as PRELOAD_FACTORS,
+    candidate_free as candidate_free,
+    preload_scan as preload_scan,
+)
+from ..montecarlo._chunk import make_chunk_fn as make_chunk_fn
+from ..montecarlo._methods import TrialFit as TrialFit
+from ..montecarlo._stats import MomentAccumulator as MomentAccumulator
+from ..montecarlo._study import prepare_study as prepare_study, run_study as run_study

@@ -1,0 +1,98 @@
+"""`jaxcal compensate`: corrected joint commands for a path under a process wrench."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .._format import format_table
+from .main import add_robot_argument, check_output_path, print_json
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "compensate",
+        help="corrected joint commands so the loaded robot lands on its programmed path",
+        description=(
+            "Compliance error compensation. PATH.csv holds per row the programmed angles "
+            "q1_deg..q6_deg and the process wrench fx_N, fy_N, fz_N, mx_Nm, my_Nm, mz_Nm "
+            "at the tool point (base frame). The target of a row is the tool pose at the "
+            "programmed angles under gravity alone; the compensated angles qc put the tool "
+            "on it under gravity and the wrench (full static equilibrium). COMMANDS.csv "
+            "holds the input columns, qc1_deg..qc6_deg, the uncompensated deflection "
+            "dx_mm, dy_mm, dz_mm, the model's residual after compensation (res_mm, "
+            "res_rot_urad), the condition number, and with a calibrated robot file "
+            "(identify --save-robot) res_std_mm, the residual's predicted standard "
+            "deviation from the calibration's covariance. Rows that cannot be compensated "
+            "(equilibrium failure, target out of reach, joint limits, near-singular) are "
+            "named with the reason and not written; the exit status is then 1."
+        ),
+    )
+    p.add_argument("path", metavar="PATH.csv", help="programmed angles and process wrench")
+    add_robot_argument(p)
+    p.add_argument(
+        "-o", "--output", required=True, metavar="COMMANDS.csv", help="compensated commands"
+    )
+    p.add_argument(
+        "--max-cond",
+        type=float,
+        default=500.0,
+        metavar="C",
+        help="refuse rows whose arm Jacobian's condition number exceeds C (default 500; "
+        "typical rows are at 3-30, a wrist within 0.06 deg of q5 = 0 above 1000)",
+    )
+    p.add_argument("--plot", metavar="FILE.png", help="path error before and after, with ±2σ")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .._identification.calibration import load_calibrated
+    from ..compensation import compensate, read_path, write_commands
+
+    check_output_path(args.output, "-o")
+    check_output_path(args.plot, "--plot")
+    if not args.max_cond > 1:
+        raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
+    robot, calibration = load_calibrated(args.robot)
+    path = read_path(args.path, robot)
+    print(f"compensating {len(path)} rows...", file=sys.stderr)
+    comp = compensate(robot, path, calibration, max_cond=args.max_cond)
+    written = write_commands(args.output, comp)
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from ..compensation import plot_compensation
+
+        fig, ax = plt.subplots(figsize=(8, 4))
+        plot_compensation(comp, ax)
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        plt.close(fig)
+    s = comp.summary()
+    refused = s["refused"]
+    for r in refused:
+        print(f"jaxcal compensate: row {r['row']} refused: {r['reason']}", file=sys.stderr)
+    if args.json:
+        print_json(
+            {**s, "output": args.output, "written": written, "calibrated": bool(calibration)}
+        )
+    else:
+        rows = [
+            ["rows", s["rows"]],
+            ["compensated (written)", written],
+            ["refused", len(refused)],
+            ["max |deflection| uncompensated", f"{s['max_deflection_mm']:.4f} mm"],
+            ["RMS |deflection| uncompensated", f"{s['rms_deflection_mm']:.4f} mm"],
+            ["max model residual after", f"{s['max_residual_um']:.2e} µm"],
+        ]
+        if s["max_res_std_mm"] is not None:
+            rows.append(["max predicted residual std", f"{s['max_res_std_mm']:.4f} mm"])
+        else:
+            rows.append(["predicted residual std", "n/a (robot file has no calibration)"])
+        print(format_table(["compensation", ""], rows))
+        print(f"commands written to {args.output}")
+    return 1 if refused else 0

@@ -1,0 +1,423 @@
+"""`jaxcal design` (optimise measurement configurations) and `jaxcal evaluate` (the
+criteria and predicted standard errors of a given design)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from .._format import format_table
+from .main import add_robot_argument, check_output_path, print_json, seed
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "design",
+        help="optimise calibration configurations (design of experiments)",
+        description=(
+            "Optimise M measurement configurations (all joint angles) for the least "
+            "parameter covariance under the robot's experiment limits (q2/q3 box, wrist "
+            "height and radius), with autodiff gradients and many BFGS starts in parallel. "
+            "Writes the design as a data-format CSV without deflection columns (feed it to "
+            "'jaxcal simulate')."
+        ),
+    )
+    add_robot_argument(p)
+    p.add_argument(
+        "--configs",
+        type=int,
+        default=None,
+        metavar="M",
+        help="measurements in all (12): --distinct configurations x --repeats",
+    )
+    p.add_argument(
+        "--distinct",
+        type=int,
+        default=None,
+        metavar="N",
+        help="distinct configurations (default M / R)",
+    )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="R",
+        help="times each configuration is measured (1); the paper: repeating does as well "
+        "as more distinct q2 levels",
+    )
+    p.add_argument(
+        "--criterion",
+        choices=("trace", "det", "weighted"),
+        default="trace",
+        help="O1 trace, O2 determinant or O3 weighted sum of the covariance (default trace)",
+    )
+    p.add_argument(
+        "--parameters",
+        default="aggregated",
+        metavar="SET",
+        help="'aggregated' (default: the paper's eq. 19, one joint-2 compliance per q2 "
+        "level, k3..k6, µrad/(N·m)), 'physical' (k, Kc, s0; relative errors) or a list of "
+        "physical parameters, e.g. k2,k3,k4,k5,k6 (the criterion over exactly those)",
+    )
+    p.add_argument(
+        "--loads",
+        choices=("vertical", "mixed"),
+        default="vertical",
+        help="vertical test load everywhere (k1 excluded; default) or alternate "
+        "vertical/horizontal (identifies k1)",
+    )
+    p.add_argument(
+        "--groups",
+        type=int,
+        default=None,
+        metavar="G",
+        help="number of distinct q2 values (configurations i, i+G, ... share q2); default 3 "
+        "for --parameters aggregated, free q2 for physical",
+    )
+    p.add_argument(
+        "--level-gap",
+        type=float,
+        default=20.0,
+        metavar="DEG",
+        help="q2 levels at least this far apart (20), so that the compensator can be "
+        "recovered from them; 0 lets them merge",
+    )
+    p.add_argument(
+        "--model",
+        choices=("full", "linear"),
+        default=None,
+        help="observation model the criterion is optimised on: the full equilibrium model "
+        "linearised at the nominal values (default; ~1 min on 2 cores) or the linear eq. 5 "
+        "model with the compensator folded into joint 2 (seconds)",
+    )
+    p.add_argument("--starts", type=int, default=8, metavar="N", help="BFGS starts (8)")
+    p.add_argument("--steps", type=int, default=300, metavar="S", help="BFGS steps per round (300)")
+    p.add_argument("--seed", type=seed, default=0, metavar="S", help="seed of the starts (0)")
+    p.add_argument(
+        "--pool",
+        type=int,
+        default=0,
+        metavar="N",
+        help="evaluate N random feasible designs first, start from the best, and report the "
+        "optimum's ratio to the best of them (0: random starts)",
+    )
+    p.add_argument(
+        "--bound-pool",
+        type=int,
+        default=2000,
+        metavar="N",
+        help="candidates of the approximate-design bound that the efficiency is stated "
+        "against (2000; 0: no bound)",
+    )
+    p.add_argument("-o", "--output", metavar="DESIGN.csv", default=None, help="write the design")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress on stderr (off when not a tty)"
+    )
+    p.set_defaults(func=run_design)
+
+    e = sub.add_parser(
+        "evaluate",
+        help="criteria and predicted standard errors of a design",
+        description=(
+            "Print every design criterion (O1 trace, O2 determinant, O3 weighted, absolute "
+            "and relative) and each parameter's predicted standard error for the "
+            "configurations and loads of a data-format CSV (deflections ignored)."
+        ),
+    )
+    e.add_argument("design", metavar="DESIGN.csv")
+    add_robot_argument(e)
+    e.add_argument(
+        "--parameters",
+        default="aggregated",
+        metavar="SET",
+        help="'aggregated' (default; one joint-2 compliance per q2 value of the file), "
+        "'physical' or a list of physical parameters (k2,k3,...)",
+    )
+    e.add_argument(
+        "--model",
+        choices=("linear", "full"),
+        default="full",
+        help="observation model: full equilibrium model linearised at the nominal values "
+        "(default) or the linear eq. 5 model, compensator folded into joint 2",
+    )
+    e.add_argument(
+        "--bound-pool",
+        type=int,
+        default=2000,
+        metavar="N",
+        help="candidates of the approximate-design bound (2000; 0: none); computed when "
+        "every load is the experiment's test load, vertical or across the arm",
+    )
+    e.add_argument("--json", action="store_true", help="print one JSON object")
+    e.set_defaults(func=run_evaluate)
+
+
+def _shares(c) -> dict[str, float]:
+    # Each parameter's share of the trace; NaN where the design is rank deficient.
+    from ..design._criteria import share_of_trace
+
+    return share_of_trace(c) if bool(c.full_rank) else dict.fromkeys(c.names, float("nan"))
+
+
+def _std_rows(c):
+    from .._parameters import parameter_units
+
+    share = _shares(c)
+    return [
+        [n, parameter_units(n), float(v), float(s), float(r), 100 * share[n]]
+        for n, v, s, r in zip(c.names, c.nominal, c.std, c.relative_std, strict=True)
+    ]
+
+
+_STD_HEADS = ["parameter", "unit", "nominal", "std", "relative_std", "trace_share_%"]
+
+
+def _sizes(args: argparse.Namespace) -> tuple[int, int]:
+    # (distinct configurations, repeats) from --configs / --distinct / --repeats.
+    r = args.repeats
+    if r < 1:
+        raise ValueError(f"--repeats must be positive, got {r}")
+    if args.distinct is not None:
+        n = args.distinct
+        if args.configs is not None and args.configs != n * r:
+            raise ValueError(
+                f"--configs {args.configs} != --distinct {n} x --repeats {r}; give two of them"
+            )
+    else:
+        m = 12 if args.configs is None else args.configs
+        if m % r:
+            raise ValueError(f"--configs {m} is not a multiple of --repeats {r}")
+        n = m // r
+    if n < 1:
+        raise ValueError(f"the number of distinct configurations must be positive, got {n}")
+    return n, r
+
+
+def run_design(args: argparse.Namespace) -> int:
+    from .._io import write_dataset
+    from .._robot import load_robot
+    from ..design._criteria import resolve_parameters
+    from ..design._optimise import optimise_design
+
+    check_output_path(args.output, "-o")
+    n, reps = _sizes(args)
+    if args.starts < 1 or args.steps < 1 or args.pool < 0 or args.bound_pool < 0:
+        raise ValueError("--starts and --steps must be positive, --pool and --bound-pool >= 0")
+    if args.level_gap < 0:
+        raise ValueError(f"--level-gap must be >= 0, got {args.level_gap}")
+    robot = load_robot(args.robot)
+    pset, _ = resolve_parameters(robot, args.parameters)
+    G = args.groups if args.groups is not None else (3 if pset == "aggregated" else None)
+    if G is not None and not 1 <= G <= n:
+        raise ValueError(f"--groups must be in 1..{n} (distinct configurations), got {G}")
+    groups = None if G is None else tuple(i % G for i in range(n))
+    d = optimise_design(
+        robot,
+        n,
+        criterion=args.criterion,
+        parameters=args.parameters,
+        loads=args.loads,
+        groups=groups,
+        starts=args.starts,
+        seed=args.seed,
+        max_steps=args.steps,
+        pool=args.pool,
+        progress=not args.no_progress and sys.stderr.isatty(),
+        model=args.model,
+        repeats=reps,
+        level_gap_deg=args.level_gap,
+        bound_pool=args.bound_pool,
+    )
+    if args.output:
+        write_dataset(args.output, d.dataset(robot), deflection=False)
+        print(f"wrote {len(d.q) * reps} measurements to {args.output}", file=sys.stderr)
+    c = d.criteria
+    eff = d.efficiency
+    if args.json:
+        print_json(
+            {
+                "criterion": d.criterion,
+                "parameters": list(c.names),
+                "model": d.model,
+                "value": d.value,
+                "bound": None if d.bound is None else d.bound.value,
+                "efficiency": eff,
+                "bound_pool": None if d.bound is None else d.bound.pool_size,
+                "distinct": len(d.q),
+                "repeats": reps,
+                "configs_deg": np.rad2deg(d.q),
+                "loads_N": d.force,
+                "std": dict(zip(c.names, np.asarray(c.std).tolist(), strict=True)),
+                "trace_share": d.shares(),
+                "feasible": d.feasible,
+                "seconds": d.seconds,
+                **({} if d.random_best is None else {"random_best": d.random_best}),
+            }
+        )
+        return 0 if d.feasible else 1
+    q = np.rad2deg(d.q)
+    print(
+        f"{d.criterion} ({'relative' if c.relative else 'absolute'}, {args.parameters}, "
+        f"{d.model} model) = {d.value:.6g}   feasible: {d.feasible}   {d.seconds:.1f} s"
+    )
+    if d.bound is not None:
+        print(
+            f"approximate-design bound {d.bound.value:.6g} over {d.bound.pool_size} candidates"
+            f"   efficiency {eff:.3f}"
+        )
+    if reps > 1:
+        print(f"{len(q)} distinct configurations, each measured {reps} times")
+    if d.random_best is not None:
+        print(
+            f"best of {args.pool} random feasible designs: {d.random_best:.6g}   "
+            f"ratio {d.value / d.random_best:.3f}"
+        )
+    rows = [[i + 1, *map(float, q[i]), *map(float, d.force[i])] for i in range(len(q))]
+    heads = ["#", *(f"q{i}_deg" for i in range(1, 7)), "fx_N", "fy_N", "fz_N"]
+    print(format_table(heads, rows))
+    print()
+    print(format_table(_STD_HEADS, _std_rows(c)))
+    return 0 if d.feasible else 1
+
+
+def _bound_problem(robot, data, parameters, model, criterion="trace"):
+    # The bound applies when the file's loads are the experiment's: the test load,
+    # vertical ("vertical") or also across the arm ("mixed"), no moments.
+    from .._model.observation import q2_groups
+    from ..design._constraints import design_loads, horizontal_loads
+    from ..design._plans import level_separation
+    from ..design._problem import DesignProblem
+
+    if robot.experiment is None:
+        return None, "the robot has no experiment section"
+    if data.has_moments:
+        return None, "the file has moments"
+    F = np.asarray(data.force)
+    down = np.asarray(design_loads(robot, data.q, "vertical"))
+    side = np.asarray(horizontal_loads(robot, data.q))
+    tol = 1e-6 * robot.experiment.max_load
+    is_down = np.abs(F - down).max(axis=1) <= tol
+    is_side = np.abs(F - side).max(axis=1) <= tol
+    if not bool((is_down | is_side).all()):
+        return None, "the loads are not the experiment's test load"
+    loads = "vertical" if is_down.all() else "mixed"
+    pset, focus = parameters
+    groups, gap = None, 0.0
+    if pset == "aggregated":
+        vals, idx = q2_groups(data.q[:, 1])
+        groups = tuple(int(i) for i in idx)
+        gap = float(min(20.0, np.rad2deg(level_separation(vals))))
+    problem = DesignProblem(
+        robot,
+        len(data),
+        loads=loads,
+        parameters=pset,
+        criterion=criterion,
+        groups=groups,
+        focus=focus,
+        model=model,
+        level_gap_deg=gap,
+    )
+    return problem, None
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    import jax.numpy as jnp
+
+    from .._io import read_dataset
+    from .._robot import load_robot
+    from ..design._bound import design_bound
+    from ..design._constraints import CONSTRAINTS, constraint_values
+    from ..design._criteria import default_relative, design_criteria, resolve_parameters
+
+    robot = load_robot(args.robot)
+    data = read_dataset(args.design, robot, require_deflection=False, ignore_deflection=True)
+    moment = data.moment if data.has_moments else None
+    model = args.model
+    pset, focus = resolve_parameters(robot, args.parameters)
+    rel, ab = (
+        design_criteria(
+            robot,
+            data.q,
+            data.force,
+            moment,
+            relative=r,
+            parameters=args.parameters,
+            sigma=data.sigma,
+            model=model,
+        )
+        for r in (True, False)
+    )
+    # The criterion's own scale: absolute for aggregated and compliance lists.
+    own = rel if default_relative(pset, focus) else ab
+    bound, why = None, "--bound-pool 0"
+    if args.bound_pool > 0 and bool(own.full_rank):
+        problem, why = _bound_problem(robot, data, (pset, focus), model)
+        if problem is not None:
+            try:
+                bound = design_bound(problem, n=args.bound_pool, include=np.asarray(data.q))
+            except ValueError as e:
+                why = str(e)
+    efficiency = None if bound is None else bound.efficiency(float(own.trace))
+    feasible = None
+    violations = {}
+    if robot.experiment is not None:
+        cv = np.asarray(constraint_values(robot, jnp.asarray(data.q)))
+        feasible = bool(cv.max() <= 1e-9)
+        violations = {
+            n: [int(i) + 1 for i in np.flatnonzero(cv[:, k] > 1e-9)]
+            for k, n in enumerate(CONSTRAINTS)
+        }
+    crit = {
+        f"{name}_{scale}": float(c.value(name))
+        for scale, c in (("relative", rel), ("absolute", ab))
+        for name in ("trace", "det", "weighted")
+    }
+    crit["logdet_relative"] = float(rel.logdet)
+    excluded = [n for n in robot.parameter_names if pset == "physical" and n not in rel.names]
+    if args.json:
+        print_json(
+            {
+                "parameters": args.parameters,
+                "model": model,
+                "configs": len(data),
+                "criteria": crit,
+                "trace": float(own.trace),
+                "bound": None if bound is None else bound.value,
+                "efficiency": efficiency,
+                "full_rank": bool(rel.full_rank),
+                "unidentifiable": list(rel.unidentifiable()),
+                "excluded": excluded,
+                "std": dict(zip(rel.names, np.asarray(rel.std).tolist(), strict=True)),
+                "relative_std": dict(
+                    zip(rel.names, np.asarray(rel.relative_std).tolist(), strict=True)
+                ),
+                "trace_share": _shares(own),
+                "feasible": feasible,
+                "violations": violations,
+            }
+        )
+        return 0
+    print(f"{len(data)} configurations, parameters: {args.parameters}, model: {model}")
+    if excluded:
+        print(f"excluded (not identifiable with these loads): {', '.join(excluded)}")
+    if not bool(rel.full_rank):
+        print(f"RANK DEFICIENT: unidentifiable {', '.join(rel.unidentifiable())}")
+    print(format_table(["criterion", "value"], [[k, v] for k, v in crit.items()]))
+    scale = "relative" if own.relative else "absolute"
+    if bound is not None:
+        print(
+            f"\ntrace ({scale}) {float(own.trace):.6g}; approximate-design bound "
+            f"{bound.value:.6g} over {bound.pool_size} candidates; efficiency {efficiency:.3f}"
+        )
+    else:
+        print(f"\ntrace ({scale}) {float(own.trace):.6g}; no efficiency ({why})")
+    print()
+    print(format_table(_STD_HEADS, _std_rows(own)))
+    if feasible is not None:
+        bad = {k: v for k, v in violations.items() if v}
+        print(f"\nfeasible: {feasible}" + (f"  violated (rows): {bad}" if bad else ""))
+    return 0

@@ -1,0 +1,169 @@
+"""The `jaxcal` command line: a thin layer over the library.
+
+Each subcommand lives in its own module `jaxcal/_cli/<name>.py` exposing
+`register(subparsers)`, which adds its parser and sets `func`. Output is a readable
+table by default and one JSON object with `--json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .._format import jsonable
+
+__all__ = ["main", "add_robot_argument", "check_output_path", "print_json"]
+
+# Subcommand modules, in the order `jaxcal --help` lists them.
+COMMANDS = (
+    "demo",
+    "simulate",
+    "identify",
+    "montecarlo",
+    "design",
+    "discover",
+    "compensate",
+    "cache",
+)
+
+
+def add_robot_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--robot",
+        default="fanuc_m900ib700",
+        metavar="FILE|NAME",
+        help="robot JSON file or built-in preset name (default: fanuc_m900ib700)",
+    )
+
+
+def add_fix_argument(p: argparse.ArgumentParser, why: str) -> None:
+    """`--fix NAME`, repeatable and comma-separated alike (`--fix k1 --fix s0` or
+    `--fix k1,s0`), the same in every command; `why` ends the help text."""
+    p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="hold a parameter at the robot's value (k1 or k1_urad_per_Nm, Kc, s0, ...); "
+        f"repeatable or comma-separated; {why}",
+    )
+
+
+def seed(text: str) -> int:
+    """argparse type of `--seed`: a non-negative integer that fits a 64-bit key."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 2**63 - 1, got {text}")
+    return v
+
+
+def fix_names(values: Sequence[str]) -> list[str]:
+    """The parameter names given with `--fix` (flattening comma lists)."""
+    return [s.strip() for v in values for s in v.split(",") if s.strip()]
+
+
+def check_output_path(path: str | None, option: str) -> None:
+    """Refuse, before any work starts, an output path that cannot be written: a
+    directory, or a file in a directory that does not exist (`ValueError` naming the
+    option)."""
+    if path is None or path == "-":
+        return
+    p = Path(path)
+    if p.is_dir() or str(path).endswith(("/", os.sep)):
+        raise ValueError(f"{option} {path}: is a directory; give a file name")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"{option} {path}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{option} {path}: directory {parent} is not writable")
+
+
+def print_json(obj) -> None:
+    print(json.dumps(jsonable(obj), indent=2))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="jaxcal",
+        description=(
+            "Elastostatic calibration of heavy quasi-serial robots (active parallelogram, "
+            "spring gravity compensator): simulate, identify, design experiments, run "
+            "Monte-Carlo noise studies and find missing model effects. Data files follow "
+            "the CSV format with unit-carrying columns (q1_deg..q6_deg, fx_N.., mx_Nm.., "
+            "dx_mm.., optional sigma_mm, id)."
+        ),
+        epilog="Run 'jaxcal COMMAND --help' for the options of each command.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"jaxcal._cli.{name}").register(sub)
+    for name, p in sub.choices.items():
+        if name != "cache":
+            p.add_argument(
+                "--no-cache",
+                action="store_true",
+                help="do not use the persistent compilation cache (also JAXCAL_CACHE_DIR=off)",
+            )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    import jax
+
+    # Identification and simulation at µm precision need float64; the CLI enables it
+    # explicitly (the library never flips global config on import).
+    jax.config.update("jax_enable_x64", True)
+    from .._io import DataError
+    from .._model.simulate import DeflectionError
+
+    if getattr(args, "uses_cache", True) and not getattr(args, "no_cache", False):
+        _enable_cache()
+
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        # A user of the command line reads the message, not our source location.
+        print(f"jaxcal {args.command}: warning: {message}", file=sys.stderr)
+
+    shown, warnings.showwarning = warnings.showwarning, show
+    try:
+        return int(args.func(args) or 0)
+    except (DataError, ValueError, DeflectionError) as e:
+        print(f"jaxcal {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # The reader (e.g. `| head`) went away: not an error of ours.
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115
+        return 0
+    except KeyboardInterrupt:
+        print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        warnings.showwarning = shown
+
+
+def _enable_cache() -> None:
+    """Turn on the persistent compilation cache; a problem with it is a warning only."""
+    import warnings
+
+    from .._cache import enable_compilation_cache
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enable_compilation_cache()
+    for w in caught:
+        print(f"jaxcal: warning: {w.message}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

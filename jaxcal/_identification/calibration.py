@@ -1,0 +1,207 @@
+"""Calibrated robot files: the identified parameters written into a robot file, with a
+`"calibration"` block that keeps what the estimates rest on.
+
+A calibrated file is an ordinary robot file (it loads with `load_robot` and
+`--robot FILE`) whose compliances and compensator values are the identified ones. Its
+`"calibration"` block records the method, the date, the data file's name and SHA-256,
+the fitted parameters with standard errors and covariance (user units, the order of
+`"parameters"`), the parameters held fixed, and the fit's χ². Compensation reads the
+covariance back (`read_calibration`) to say how accurate a correction is.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._parameters import get_parameters, set_parameters
+from .._robot import Robot, load_robot_dict, robot_from_dict, robot_to_dict
+from .result import IdentificationResult
+
+__all__ = [
+    "Calibration",
+    "calibrated_robot",
+    "calibration_block",
+    "load_calibrated",
+    "read_calibration",
+    "save_robot",
+]
+
+
+class Calibration(eqx.Module):
+    """What a calibrated robot file says about its own accuracy.
+
+    - `names`: fitted parameters (with units, e.g. `k2_urad_per_Nm`), static.
+    - `estimate`, `std` `(p,)` and `covariance` `(p, p)`: user units.
+    - `fixed`: parameters held at the robot's value (no uncertainty), static.
+    - `method`, `date`, `data_file`, `data_sha256`: provenance, static.
+    - `chi2_red`, `dof`: the fit's reduced χ² and degrees of freedom.
+    """
+
+    names: tuple[str, ...] = eqx.field(static=True)
+    estimate: Float[Array, " p"]
+    std: Float[Array, " p"]
+    covariance: Float[Array, "p p"]
+    fixed: tuple[str, ...] = eqx.field(static=True, default=())
+    method: str = eqx.field(static=True, default="")
+    date: str = eqx.field(static=True, default="")
+    data_file: str = eqx.field(static=True, default="")
+    data_sha256: str = eqx.field(static=True, default="")
+    chi2_red: float = eqx.field(static=True, default=math.nan)
+    dof: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        p = len(self.names)
+        if self.estimate.shape != (p,) or self.std.shape != (p,):
+            raise ValueError(f"calibration: estimate and std must have {p} entries")
+        if self.covariance.shape != (p, p):
+            raise ValueError(f"calibration: covariance must be {p}x{p}")
+
+    def full_covariance(self, robot: Robot) -> Float[Array, "P P"]:
+        """The covariance over all of `robot.parameter_names` (zero for fixed ones)."""
+        names = robot.parameter_names
+        idx = [names.index(n) for n in self.names]
+        P = len(names)
+        cov = jnp.zeros((P, P), self.covariance.dtype)
+        return cov.at[np.ix_(idx, idx)].set(self.covariance)
+
+
+def calibrated_robot(robot: Robot, result: IdentificationResult) -> Robot:
+    """`robot` with the identified parameters of `result` (fixed ones keep their value)."""
+    names = robot.parameter_names
+    p = np.asarray(get_parameters(robot), dtype=float).copy()
+    for n, v in zip(result.names, np.asarray(result.estimate), strict=True):
+        p[names.index(n)] = float(v)
+    return set_parameters(robot, jnp.asarray(p))
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 16), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def calibration_block(result: IdentificationResult, data_file: str | Path | None) -> dict:
+    """The `"calibration"` block of a calibrated robot file (JSON-ready)."""
+    path = None if data_file is None else Path(data_file)
+    z = np.asarray(result.standardized)
+    return {
+        "method": result.method,
+        "date": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
+        "data_file": "" if path is None else path.name,
+        "data_sha256": "" if path is None or not path.is_file() else _sha256(path),
+        "n_rows": int(z.shape[0]),
+        "parameters": list(result.names),
+        "estimate": np.asarray(result.estimate, float).tolist(),
+        "std": np.asarray(result.std, float).tolist(),
+        "covariance": np.asarray(result.covariance, float).tolist(),
+        "fixed": list(result.fixed),
+        # Over the rows the fit kept (gross errors excluded): χ²_red · dof.
+        "chi2": float(result.chi2_red) * int(result.dof),
+        "excluded_rows": [int(i) + 1 for i in result.gross_rows] if result.gross_excluded else [],
+        "chi2_red": float(result.chi2_red),
+        "dof": int(result.dof),
+        "converged": bool(result.converged),
+    }
+
+
+def save_robot(
+    path: str | Path,
+    robot: Robot,
+    result: IdentificationResult,
+    data_file: str | Path | None = None,
+) -> Robot:
+    """Write `robot` with the identified parameters of `result` as a robot file at
+    `path`, with its `"calibration"` block; returns the calibrated robot."""
+    new = calibrated_robot(robot, result)
+    d = robot_to_dict(new)
+    src = "" if data_file is None else f" from {Path(data_file).name}"
+    d["description"] = (
+        f"{robot.description} Calibrated ({result.method}){src}.".strip()
+        if robot.description
+        else f"Calibrated ({result.method}){src}."
+    )
+    d["calibration"] = calibration_block(result, data_file)
+    # Round trip through the validating reader before anything is written.
+    robot_from_dict(json.loads(json.dumps(d)), source=str(path))
+    Path(path).write_text(json.dumps(d, indent=2) + "\n")
+    return new
+
+
+def _calibration_from_dict(c: Any, robot: Robot) -> Calibration:
+    where = "calibration"
+    if not isinstance(c, dict):
+        raise ValueError(f"{where} must be a JSON object")
+    names = c.get("parameters")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"{where}.parameters must be a list of parameter names")
+    for n in names:
+        if n not in robot.parameter_names:
+            raise ValueError(
+                f"{where}.parameters: unknown parameter {n!r} (expected {robot.parameter_names})"
+            )
+    p = len(names)
+
+    def arr(key, shape):
+        try:
+            a = np.asarray(c.get(key), dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}.{key} must be numbers") from None
+        if a.shape != shape or not np.all(np.isfinite(a)):
+            raise ValueError(f"{where}.{key} must be finite numbers of shape {shape}")
+        return a
+
+    cov = arr("covariance", (p, p))
+    if not np.allclose(cov, cov.T, rtol=1e-9, atol=0) or np.any(np.diag(cov) < 0):
+        raise ValueError(f"{where}.covariance must be symmetric with a non-negative diagonal")
+    fixed = c.get("fixed", [])
+    if not isinstance(fixed, list):
+        raise ValueError(f"{where}.fixed must be a list of names")
+    return Calibration(
+        names=tuple(names),
+        estimate=jnp.asarray(arr("estimate", (p,))),
+        std=jnp.asarray(arr("std", (p,))),
+        covariance=jnp.asarray(cov),
+        fixed=tuple(str(f) for f in fixed),
+        method=str(c.get("method", "")),
+        date=str(c.get("date", "")),
+        data_file=str(c.get("data_file", "")),
+        data_sha256=str(c.get("data_sha256", "")),
+        chi2_red=float(c.get("chi2_red", math.nan)),
+        dof=int(c.get("dof", 0)),
+    )
+
+
+def load_calibrated(
+    robot: str | Path | Robot = "fanuc_m900ib700",
+) -> tuple[Robot, Calibration | None]:
+    """A robot and its `"calibration"` block (`None` when it has none: presets, robot
+    files never calibrated, a `Robot` object), from one reading of the file. Raises
+    `ValueError` naming the key of a malformed file or block."""
+    if isinstance(robot, Robot):
+        return robot, None
+    d, source = load_robot_dict(robot)
+    r = robot_from_dict(d, source=source)
+    if d.get("calibration") is None:
+        return r, None
+    try:
+        return r, _calibration_from_dict(d["calibration"], r)
+    except ValueError as e:
+        raise ValueError(f"{source}: robot file: {e}") from None
+
+
+def read_calibration(robot: str | Path | Robot = "fanuc_m900ib700") -> Calibration | None:
+    """The `"calibration"` block of a robot file, or `None` when it has none (see
+    `load_calibrated`, which returns the robot too)."""
+    return load_calibrated(robot)[1]

@@ -1,0 +1,378 @@
+"""Host-side identification entry point: input checks, identifiability, then one of the
+pure fitting cores (`fit_linear`, `fit_two_step`, `fit_nonlinear`) under `jit`.
+
+Identifiability is decided *before* solving, from the σ-weighted design of the linear
+model (its columns `∂Δp/∂p`, each scaled by the parameter's prior value, then
+normalised): a parameter with no sensitivity, or one taking part in a (numerical)
+null direction of the design, cannot be determined by the data. It is named in a
+`ValueError` with a suggested `--fix`, or, if the caller fixed it, held at the robot's
+value with a warning. No singular matrix is ever inverted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import Dataset
+from .._model.linear import linear_deflection
+from .._parameters import get_parameters, set_parameters
+from .._robot import Robot
+from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
+from .methods import (
+    linear_columns,
+    linear_system,
+    nonlinear_with_groups,
+    solve_linear_jit,
+)
+from .result import IdentificationResult, resolve_name
+from .two_step import solve_two_step_jit, two_step_system
+
+__all__ = [
+    "identify",
+    "METHODS",
+    "identifiability",
+    "check_inputs",
+    "design_matrix",
+    "plausibility",
+]
+
+METHODS = ("linear", "two-step", "nonlinear")
+
+#: A column whose norm is below this fraction of the largest has no sensitivity.
+_NO_SENSITIVITY = 1e-9
+#: Singular values of the column-normalised design below this are null directions.
+#: Exact rank deficiency gives ~1e-15 in float64; a genuine but weak design (k1 from a
+#: few horizontal loads, compensator from three close q2 values) stays above ~1e-4.
+_NULL = 1e-7
+#: Order in which parameters are proposed for fixing (last-resort ones first).
+_FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
+
+
+def check_inputs(robot: Robot, data: Dataset) -> None:
+    """Raise `ValueError` naming the problem: float64 off, no deflections, non-finite
+    values, non-positive σ, joint angles outside the robot's limits."""
+    x64 = jax.config.jax_enable_x64  # pyright: ignore[reportAttributeAccessIssue]
+    if not x64 or jnp.zeros(()).dtype != jnp.float64:
+        raise ValueError(
+            "identification needs float64: call jax.config.update('jax_enable_x64', True) "
+            "before using jaxcal (deflections are µm on metres)"
+        )
+    if data.deflection is None:
+        raise ValueError("data has no measured deflections (columns dx_mm, dy_mm, dz_mm)")
+    for name in ("q", "force", "moment", "deflection", "sigma"):
+        a = np.asarray(getattr(data, name))
+        bad = ~np.isfinite(a)
+        if bad.ndim > 1:
+            bad = bad.any(axis=1)
+        if bad.any():
+            rows = ", ".join(str(i + 1) for i in np.flatnonzero(bad)[:20])
+            raise ValueError(f"data: non-finite (NaN or infinite) {name} in row(s) {rows}")
+    if np.any(np.asarray(data.sigma) <= 0):
+        raise ValueError("data: sigma must be positive in every row")
+    q = np.asarray(data.q)
+    lim = np.asarray(robot.joint_limits)
+    tol = 1e-9
+    out = (q < lim[:, 0] - tol) | (q > lim[:, 1] + tol)
+    if out.any():
+        msgs = []
+        for r, j in zip(*np.nonzero(out), strict=True):
+            msgs.append(
+                f"row {r + 1}: q{j + 1} = {np.rad2deg(q[r, j]):.4g} deg outside "
+                f"[{np.rad2deg(lim[j, 0]):g}, {np.rad2deg(lim[j, 1]):g}]"
+            )
+        more = f" ... and {len(msgs) - 10} more" if len(msgs) > 10 else ""
+        raise ValueError(
+            "data: joint angles outside the joint limits: " + "; ".join(msgs[:10]) + more
+        )
+
+
+@eqx.filter_jit
+def _physical_columns(robot: Robot, data: Dataset):
+    p0 = get_parameters(robot)
+
+    def one(q, f, m):
+        fn = lambda p: linear_deflection(set_parameters(robot, p), q, f, m)[:3]
+        return jax.jacfwd(fn)(p0)
+
+    return jax.vmap(one)(data.q, data.force, data.moment)
+
+
+def design_matrix(robot: Robot, data: Dataset, method: str) -> tuple[np.ndarray, tuple[str, ...]]:
+    """σ-weighted, prior-scaled design `(3n, p)` used for the identifiability check and
+    its column names. Nonlinear: the linear model's Jacobian w.r.t. all physical
+    parameters (the full model's tangent up to gravity/`H_θθ` terms); linear: `k1..k6`;
+    two-step: step-1 columns `k1, k2@q2ᵢ.., k3..k6`."""
+    p0 = np.asarray(get_parameters(robot))
+    sig = np.asarray(data.sigma)[:, None, None]
+    if method == "nonlinear":
+        cols = np.asarray(_physical_columns(robot, data)) * p0
+        names = robot.parameter_names
+    else:
+        cols, _ = linear_columns(robot, data)
+        cols = np.asarray(cols) * p0[:6]
+        names = robot.parameter_names[:6]
+    return (cols / sig).reshape(-1, cols.shape[2]), names
+
+
+def identifiability(X: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[str]]:
+    """Parameters the design `X` (columns ↔ `names`) cannot determine, and a minimal set
+    to fix (preferring compensator parameters and k1). Host-side, SVD-based."""
+    norms = np.linalg.norm(X, axis=0)
+    dead = norms <= _NO_SENSITIVITY * max(norms.max(), 1e-300)
+    bad = set(np.flatnonzero(dead).tolist())
+    live = np.flatnonzero(~dead)
+
+    def nullity(cols):
+        if len(cols) == 0:
+            return 0
+        Xn = X[:, cols] / norms[cols]
+        s = np.linalg.svd(Xn, compute_uv=False)
+        return int(np.sum(s < _NULL * max(s[0], 1e-300)))
+
+    if len(live):
+        Xn = X[:, live] / norms[live]
+        _, s, Vt = np.linalg.svd(Xn, full_matrices=False)
+        null = Vt[s < _NULL * s[0]]
+        if len(null):
+            weight = np.linalg.norm(null, axis=0)
+            bad |= {int(live[i]) for i in np.flatnonzero(weight > 1e-3)}
+    fix = sorted(int(i) for i in np.flatnonzero(dead))
+    cols = [int(i) for i in live]
+    order = sorted(
+        [i for i in cols if i in bad],
+        key=lambda i: (
+            _FIX_PREFERENCE.index(names[i])
+            if names[i] in _FIX_PREFERENCE
+            else len(_FIX_PREFERENCE) + (len(names) - i)
+        ),
+    )
+    for i in order:
+        if nullity(cols) == 0:
+            break
+        trial = [c for c in cols if c != i]
+        if nullity(trial) < nullity(cols):
+            cols = trial
+            fix.append(i)
+    return [names[i] for i in sorted(bad)], [names[i] for i in sorted(fix)]
+
+
+def _reasons(robot: Robot, data: Dataset, bad: list[str]) -> str:
+    why = []
+    f = np.asarray(data.force)
+    m = np.asarray(data.moment)
+    if "k1_urad_per_Nm" in bad and np.allclose(f[:, :2], 0) and np.allclose(m[:, :2], 0):
+        why.append(
+            "every load is vertical, and a vertical force gives no torque about the "
+            "(vertical) axis 1, so k1 does not affect the deflections"
+        )
+    n_q2 = len(np.unique(np.round(np.rad2deg(np.asarray(data.q[:, 1])), 6)))
+    if robot.has_compensator and {"Kc_N_per_m", "s0_m"} & set(bad) and n_q2 < 3:
+        why.append(
+            f"the rows have {n_q2} distinct q2 value(s); k2, Kc and s0 act only through the "
+            "joint-2 stiffness at each q2, so at least 3 distinct q2 values are needed"
+        )
+    return ("; ".join(why) + ".") if why else "the design matrix is rank deficient."
+
+
+def identify(
+    robot: Robot,
+    data: Dataset,
+    method: str = "nonlinear",
+    *,
+    fix: tuple[str, ...] | list[str] = (),
+    robust: bool = False,
+    huber_delta: float = 1.5,
+    max_steps: int = 64,
+    screen_gross: bool = True,
+    keep_outliers: bool = False,
+) -> IdentificationResult:
+    """Identify the elastostatic parameters of `robot` from measured `data`.
+
+    **Arguments**
+
+    - `method`: `"nonlinear"` (default; full equilibrium model, Levenberg–Marquardt),
+      `"two-step"` (eqs. 20–22) or `"linear"` (eq. 3 on the linear model).
+    - `fix`: parameter names (`"k1"` or `"k1_urad_per_Nm"`) held at the robot's value
+      (a warning says so).
+    - `robust`: Huber loss (threshold `huber_delta` σ) instead of least squares
+      (nonlinear method only).
+    - `screen_gross`: find gross errors one row at a time (`jaxcal._identification.gross`: the
+      w-statistic against a Bonferroni critical value, 0.1 % false alarms per data set)
+      and, unless `keep_outliers`, exclude them from the estimates. Named in
+      `result.gross_errors()`; a warning says so.
+
+    Raises `ValueError` for float64 off, missing deflections, non-finite values, joint
+    angles outside the limits, and parameters the data cannot determine (named, with
+    the `--fix` that would make the rest identifiable). Warns if the fit did not
+    converge. Outlier rows: `result.outliers(threshold)`.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if robust and method != "nonlinear":
+        raise ValueError("robust (Huber) fitting is available for the nonlinear method only")
+    check_inputs(robot, data)
+    names = robot.parameter_names
+    fixed = tuple(dict.fromkeys(resolve_name(str(f), names) for f in fix))
+    if method == "two-step":
+        if not robot.has_compensator:
+            raise ValueError("the two-step method needs a robot with a compensator; use linear")
+        for n in ("k2_urad_per_Nm", "Kc_N_per_m", "s0_m"):
+            if n in fixed:
+                raise ValueError(f"the two-step method cannot hold {n} fixed; use nonlinear")
+    if method == "linear":
+        fixed = tuple(f for f in fixed if f not in ("Kc_N_per_m", "s0_m"))
+    X, cols = design_matrix(robot, data, method)
+    keep = [i for i, n in enumerate(cols) if n not in fixed]
+    bad, suggest = identifiability(X[:, keep], tuple(cols[i] for i in keep))
+    if method == "two-step" and not bad:
+        n_q2 = len(np.unique(np.round(np.rad2deg(np.asarray(data.q[:, 1])), 6)))
+        if n_q2 < 3:
+            bad, suggest = ["Kc_N_per_m", "s0_m"], []
+    if bad:
+        flags = " ".join("--fix " + s.split("_")[0] for s in suggest)
+        short = lambda ns: ", ".join(n.split("_")[0] for n in ns)
+        hint = (
+            f" Fix them at the robot's values with {flags}"
+            f" (Python: fix={tuple(s.split('_')[0] for s in suggest)})."
+            if suggest
+            else " The two-step method needs at least 3 distinct q2 values; use the "
+            "nonlinear method with --fix Kc --fix s0."
+        )
+        raise ValueError(
+            f"the data cannot determine {short(bad)} ({', '.join(bad)}): "
+            f"{_reasons(robot, data, bad)}{hint}"
+        )
+    p0 = np.asarray(get_parameters(robot))
+    for n in fixed:
+        warnings.warn(
+            f"{n} is fixed at the robot's value {p0[names.index(n)]:g}; its uncertainty is "
+            "not included in the others' standard errors",
+            stacklevel=2,
+        )
+    free = tuple(n not in fixed for n in names)
+
+    def fit(d: Dataset) -> IdentificationResult:
+        if method == "linear":
+            return _linear(robot, d, free)
+        if method == "two-step":
+            return _two_step(robot, d, free)
+        loss = "huber" if robust else "l2"
+        return _nonlinear(robot, d, free, loss, float(huber_delta), int(max_steps))
+
+    res = fit(data)
+    if screen_gross:
+        res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
+    if not bool(res.converged):
+        warnings.warn(
+            f"the {method} fit did not converge (or its design is numerically singular); "
+            "the estimates are not reliable",
+            stacklevel=2,
+        )
+    for msg in plausibility(robot, res):
+        warnings.warn(msg, stacklevel=2)
+    return res
+
+
+def _screen_gross(res, data, design, fit, *, exclude: bool):
+    # Rows are found one at a time with the earlier ones excluded (a gross error drags
+    # the fit, so a single pass would name many innocent rows); with `exclude=False`
+    # the rows found are named but the estimates are those of the fit with every row.
+    crit = critical_w(3 * len(data))
+    limit = max(1, len(data) // 10)
+    rows: list[int] = []
+    full, cur = res, res
+    while len(rows) < limit:
+        w = w_statistics(cur, design, rows)
+        i = int(np.argmax(w))
+        if not w[i] > crit:
+            break
+        rows.append(i)
+        cur = fit(exclude_rows(data, rows))
+    if not rows:
+        return res
+    cur = finalise_excluded(cur, data, rows)
+    if len(rows) == limit and w_statistics(cur, design, rows).max() > crit:
+        warnings.warn(
+            f"more than {limit} rows look like gross errors; the data set may be wrong as "
+            "a whole (units, frames, sign of the loads)",
+            stacklevel=3,
+        )
+    out = cur if exclude else dataclasses.replace(full, gross_rows=tuple(rows))
+    for line in out.gross_report(data.ids):
+        warnings.warn(line, stacklevel=3)
+    return out
+
+
+def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:
+    # Two-sided 99.9 % band of χ²(dof) by the Wilson–Hilferty cube-root normal
+    # approximation (relative error < 1 % of the quantile for dof ≥ 10).
+    k = max(dof, 1)
+    c = 2.0 / (9.0 * k)
+    lo = k * max(1.0 - c - z * float(np.sqrt(c)), 0.0) ** 3
+    hi = k * (1.0 - c + z * float(np.sqrt(c))) ** 3
+    return lo, hi
+
+
+def plausibility(robot: Robot, res: IdentificationResult) -> list[str]:
+    """Warnings for results that should not pass silently: a reduced χ² outside its
+    99.9 % band for the degrees of freedom (residuals far smaller or larger than the
+    stated σ: wrong units, wrong σ, gross errors or a missing effect), and estimates that
+    are not positive or more than 10× from the robot file's value."""
+    out = []
+    chi2_red = float(res.chi2_red)
+    if res.dof >= 1 and np.isfinite(chi2_red):
+        lo, hi = _chi2_band(res.dof)
+        band = f"[{lo / res.dof:.3g}, {hi / res.dof:.3g}] for {res.dof} dof"
+        ratio = float(np.sqrt(max(chi2_red, 1e-300)))
+        if chi2_red * res.dof < lo:
+            out.append(
+                f"reduced chi2 {chi2_red:.3g} is below its 99.9 % band {band}: the residuals "
+                f"are {1 / ratio:.3g}x smaller than the stated sigma. Are the deflections in "
+                "mm (not m), and is sigma_mm right?"
+            )
+        elif chi2_red * res.dof > hi:
+            out.append(
+                f"reduced chi2 {chi2_red:.3g} is above its 99.9 % band {band}: the residuals "
+                f"are {ratio:.3g}x larger than the stated sigma. Is sigma_mm right, are there "
+                "gross errors, or is the model missing an effect (jaxcal discover)?"
+            )
+    p0 = dict(zip(robot.parameter_names, np.asarray(get_parameters(robot)), strict=True))
+    for n, v in zip(res.names, np.asarray(res.estimate), strict=True):
+        ref = float(p0[n])
+        short = n.split("_")[0]
+        if v <= 0:
+            out.append(f"{short} estimate {v:.4g} is not positive: no spring has that")
+        elif ref > 0 and not ref / 10 <= v <= ref * 10:
+            out.append(
+                f"{short} estimate {v:.4g} is more than 10x from the robot file's {ref:.4g}: "
+                "check the units of the data and of the robot file"
+            )
+    return out
+
+
+# Module-level jitted cores: repeated calls with equal shapes reuse one compilation.
+@eqx.filter_jit
+def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps):
+    return nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps)
+
+
+def _nonlinear(robot, data, free, loss, delta, steps):
+    q = np.asarray(data.q)
+    u, inv = np.unique(q, axis=0, return_inverse=True)
+    return nonlinear_jit(
+        robot, data, jnp.asarray(u), jnp.asarray(inv.reshape(-1)), free, loss, delta, steps
+    )
+
+
+def _linear(robot, data, free):
+    return solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
+
+
+def _two_step(robot, data, free):
+    return solve_two_step_jit(two_step_system(robot, data, free=free), data.deflection)

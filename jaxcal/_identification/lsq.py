@@ -1,0 +1,323 @@
+"""Generic weighted least squares with covariance: the numerical core of identification.
+
+Two pure, `jax.vmap`-able solvers (no host-side branching on values, never raise):
+
+- `nonlinear_fit`: optimistix Levenberg–Marquardt on a model `predict(p) -> (n, 3)`
+  deflections (m), parameters scaled to O(1), covariance `(JᵀWJ)⁻¹` from the Jacobian at
+  the optimum. Reused by the discrepancy workflow with extended parameter vectors.
+- `weighted_linear_fit`: the closed-form counterpart for a model linear in its
+  parameters, `Δp = X p + c`, with the noise-independent factorisation exposed
+  (`linear_factor` / `linear_solve_factored`) so Monte-Carlo studies factor once.
+
+Covariances use the *stated* σ (not rescaled by χ²); χ² is reported separately. A
+singular or numerically rank-deficient normal matrix is never inverted: the fit is
+flagged `converged = False` (its covariance is then NaN).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from .._linalg.dense import SmallCholesky, SmallQR, eigvalsh
+
+__all__ = [
+    "LsqFit",
+    "nonlinear_fit",
+    "huber_transform",
+    "huber_weights",
+    "covariance_from_jacobian",
+    "LinearFactor",
+    "linear_factor",
+    "linear_solve_factored",
+]
+
+#: Relative eigenvalue floor of the Jacobi-scaled normal matrix below which a fit is
+#: called rank deficient (float64 round-off of JᵀJ is ~1e-16 relative; 1e-12 leaves a
+#: margin of four decades while still flagging exact or near-exact collinearity).
+RCOND = 1e-12
+_JAC = "fwd"
+
+
+class _LevenbergMarquardt(optx.LevenbergMarquardt):
+    """optimistix's Levenberg–Marquardt that also stops once a *rejected* step is
+    followed by a proposal smaller than the tolerance.
+
+    The model is an iterative equilibrium solve, so near the optimum the loss carries
+    round-off noise (~1e-11 relative) larger than the predicted reduction of the tiny
+    remaining steps: every further step is rejected and the plain solver shrinks its
+    trust region until `max_steps` (seen: converged after 4-5 steps, then 20 rejected
+    ones). A proposal within the tolerance after a rejection means no further progress
+    is possible at the requested precision; the last accepted point is the answer.
+    Under `vmap` the batch runs until its slowest member stops, so this matters.
+    """
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        step = state.y_eval - y  # y is one array here (the scaled free parameters)
+        tiny = self.norm(step) < self.atol + self.rtol * self.norm(y)
+        stalled = (state.num_steps_since_acceptance > 0) & tiny & jnp.invert(state.first_step)
+        return done | stalled, result
+
+
+class LsqFit(eqx.Module):
+    """Result of a least-squares fit, in the caller's parameter units.
+
+    - `estimate`: `(P,)` the full parameter vector; fixed entries keep their start value.
+    - `covariance`: `(P, P)`, `(JᵀWJ)⁻¹` with the stated σ; zero rows/columns for fixed
+      parameters, NaN when the normal matrix is rank deficient.
+    - `residuals`: `(n, 3)` measured − model, m.
+    - `chi2`: `Σ (residual/σ)²` (plain, not the robust loss).
+    - `converged`: solver succeeded, model evaluations finite/converged, design well posed.
+    - `steps`: solver steps taken.
+    """
+
+    estimate: Float[Array, " P"]
+    covariance: Float[Array, "P P"]
+    residuals: Float[Array, "n 3"]
+    chi2: Float[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+
+
+def huber_transform(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
+    """`sign(r)·sqrt(2ρ(r))` with ρ the Huber loss, so `½Σ r'² = Σ ρ(r)`: an ordinary
+    least-squares solver then minimises the Huber loss. Identity for `|r| ≤ delta`."""
+    a = jnp.abs(r)
+    # The clamp keeps the unused branch's sqrt argument positive (finite gradients).
+    outer = jnp.sign(r) * jnp.sqrt(jnp.maximum(delta * (2.0 * a - delta), delta * delta))
+    return jnp.where(a <= delta, r, outer)
+
+
+def huber_weights(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
+    """IRLS weights `ψ(r)/r = min(1, delta/|r|)` of the Huber loss."""
+    return jnp.minimum(1.0, delta / jnp.maximum(jnp.abs(r), 1e-300))
+
+
+def covariance_from_jacobian(
+    J: Float[Array, "m q"], w: Float[Array, " m"] | None = None
+) -> tuple[Float[Array, "q q"], Bool[Array, ""]]:
+    """`(Jᵀ diag(w) J)⁻¹` for a σ-weighted Jacobian `J`, and whether it is well posed.
+
+    The normal matrix is Jacobi-scaled (unit diagonal) before the rank test and the
+    Cholesky solve, so the test measures collinearity, not units. Never inverts a
+    singular matrix: ill-posed → `(NaN matrix, False)`.
+    """
+    Jw = J if w is None else J * jnp.sqrt(w)[:, None]
+    N = Jw.T @ Jw
+    d = jnp.sqrt(jnp.diag(N))
+    ok_d = jnp.all(d > 0) & jnp.all(jnp.isfinite(N))
+    d = jnp.where(d > 0, d, 1.0)
+    Ns = N / (d[:, None] * d[None, :])
+    Ns = 0.5 * (Ns + Ns.T)
+    Ns = jnp.where(jnp.isfinite(Ns), Ns, 0.0)
+    lam = eigvalsh(jax.lax.stop_gradient(Ns))
+    well = ok_d & (lam[0] > RCOND * lam[-1])
+    # Solve on a safe matrix (identity when ill posed) so Cholesky never sees a
+    # singular matrix; the result is then replaced by NaN.
+    q = N.shape[0]
+    eye = jnp.eye(q, dtype=N.dtype)
+    op = lx.MatrixLinearOperator(jnp.where(well, Ns, eye), lx.positive_semidefinite_tag)
+    X = jax.vmap(
+        lambda b: lx.linear_solve(op, b, SmallCholesky(), throw=False).value, in_axes=1, out_axes=1
+    )(eye)
+    cov = X / (d[:, None] * d[None, :])
+    cov = 0.5 * (cov + cov.T)
+    return jnp.where(well, cov, jnp.nan), well
+
+
+def _split(out):
+    if isinstance(out, tuple):
+        pred, ok = out
+        return pred, jnp.all(ok)
+    return out, jnp.array(True)
+
+
+_NO_MESH = jax.sharding.AbstractMesh((), ())
+
+
+def nonlinear_fit(
+    predict: Callable[[Float[Array, " P"]], Float[Array, "n 3"] | tuple[Array, Array]],
+    p0: Float[Array, " P"],
+    target: Float[Array, "n 3"],
+    sigma: Float[Array, " n"],
+    *,
+    scale: Float[Array, " P"] | None = None,
+    free: tuple[bool, ...] | None = None,
+    loss: str = "l2",
+    huber_delta: float = 1.5,
+    max_steps: int = 32,
+    rtol: float = 1e-5,
+    atol: float = 1e-5,
+) -> LsqFit:
+    """Weighted nonlinear least squares `min Σ ρ((target − predict(p))/σ)` with
+    optimistix Levenberg–Marquardt, started at `p0`.
+
+    **Arguments**
+
+    - `predict(p)`: the model deflections `(n, 3)` (m) for a parameter vector `p` (any
+      units, e.g. `jaxcal.get_parameters` order plus extension parameters). May return
+      `(deflections, ok)` with `ok` a bool flag (scalar or `(n,)`) of its own solves;
+      non-finite or not-ok predictions make the fit `converged = False`. Must be
+      differentiable (forward mode) in `p`.
+    - `p0`: start (and value of fixed parameters).
+    - `target`: measured deflections `(n, 3)` (m); `sigma`: `(n,)` per-row σ (m).
+    - `scale`: `(P,)` typical size of each parameter's change (default `|p0|`, 1 where 0):
+      the solver works in `y = (p − p0)/scale`, O(1), which makes its tolerances
+      (`rtol`, `atol`) relative to the scale.
+    - `free`: static tuple of bools, which parameters are fitted (default all).
+    - `loss`: `"l2"` or `"huber"` (residual transform `huber_transform` with threshold
+      `huber_delta` in units of σ; covariance then uses the IRLS weights).
+    - `max_steps`: LM step budget (fits that hit it are flagged, not raised).
+
+    Returns an `LsqFit`. Pure and vmappable: batch over `target` with `jax.vmap`.
+
+    ```python
+    to_robot = lambda p: set_parameters(robot, p)
+    predict = lambda p: jax.vmap(lambda q, f, m: solve_deflection(to_robot(p), q, f, m))(
+        data.q, data.force, data.moment)          # returns (dp, ok)
+    fit = nonlinear_fit(predict, get_parameters(robot), data.deflection, data.sigma)
+    ```
+    """
+    if loss not in ("l2", "huber"):
+        raise ValueError(f"loss must be 'l2' or 'huber', got {loss!r}")
+    p0 = jnp.asarray(p0)
+    P = p0.shape[0]
+    if free is None:
+        free = (True,) * P
+    free = tuple(bool(f) for f in free)
+    if len(free) != P:
+        raise ValueError(f"free must have {P} entries (one per parameter), got {len(free)}")
+    idx = jnp.asarray([i for i, f in enumerate(free) if f], dtype=int)
+    if scale is None:
+        scale = jnp.where(p0 != 0, jnp.abs(p0), 1.0)
+    scale = jnp.asarray(scale, p0.dtype)
+    s_free = scale[idx]
+    sig = jnp.asarray(sigma, p0.dtype)[:, None]
+    target = jnp.asarray(target, p0.dtype)
+
+    def params(y):
+        return p0.at[idx].add(s_free * y)
+
+    def weighted(y):
+        pred, ok = _split(predict(params(y)))
+        return ((target - pred) / sig).reshape(-1), (pred, ok)
+
+    def evaluate(y):
+        """Everything the fit needs at `y` from ONE model evaluation (forward mode, one
+        JVP per free parameter): the σ-weighted residual `r` and its Jacobian `J`, the
+        loss-transformed residual and Jacobian that LM works on, the prediction and
+        the model's ok flag."""
+        r, J, (pred, ok) = jax.vmap(
+            lambda e: jax.jvp(weighted, (y,), (e,), has_aux=True), out_axes=(None, 1, None)
+        )(jnp.eye(y.shape[0], dtype=y.dtype))
+        if loss == "huber":
+            rt, Jt = jax.vmap(
+                lambda c: jax.jvp(lambda v: huber_transform(v, huber_delta), (r,), (c,)),
+                in_axes=1,
+                out_axes=(None, 1),
+            )(J)
+        else:
+            rt, Jt = r, J
+        Jt = jnp.where(jnp.isfinite(Jt), Jt, 0.0)
+        return rt, (Jt, r, J, pred, ok.astype(y.dtype))
+
+    # The residual carries a custom JVP that materialises its Jacobian by forward mode
+    # (p ≤ ~10 JVPs): LM then linearises to a plain matrix product. Letting optimistix
+    # linearise/transpose through the model's inner lineax solves fails (lineax's
+    # tangent solves raise on non-finite values, which LM's trial steps can produce)
+    # and reverse mode would cost one VJP per residual (3n). The auxiliary outputs
+    # (raw residual, Jacobian, prediction) come back in the solver's final state, so
+    # the covariance needs no further evaluation of the model: every evaluation is a
+    # copy of the (large) equilibrium program, and compile time grows with the copies.
+    @jax.custom_jvp
+    def residual(y):
+        return evaluate(y)
+
+    @residual.defjvp
+    def _residual_jvp(primals, tangents):
+        (y,), (t,) = primals, tangents
+        out = evaluate(y)
+        rt, aux = out
+        zeros = jax.tree_util.tree_map(jnp.zeros_like, aux)
+        return out, (aux[0] @ t, zeros)
+
+    def fn(y, _):
+        return residual(y)
+
+    y0 = jnp.zeros(idx.shape[0], p0.dtype)
+    # Householder QR in plain jnp (`SmallQR`), not lineax's LAPACK QR: fits run vmapped
+    # over Monte-Carlo trials, where batched LAPACK kernels can deadlock (see `_dense`).
+    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())  # pyright: ignore[reportCallIssue]
+    # optimistix traces the residual twice (shape inference under `eval_shape`, which
+    # runs in an empty abstract-mesh context, and the solve itself). Under one context
+    # the model's jitted inner pieces (`batch_roots`) are traced once and reused.
+    with jax.sharding.use_abstract_mesh(_NO_MESH):
+        sol = optx.least_squares(
+            fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False, options={"jac": _JAC}
+        )
+    y = sol.value
+    p = params(y)
+    # The Gauss–Newton state holds the evaluation at the returned (last accepted) point.
+    _, r, J, pred, okf = sol.state.aux
+    ok = okf > 0.5
+    res = target - pred
+    w = huber_weights(r, huber_delta) if loss == "huber" else None
+    cov_y, well = covariance_from_jacobian(J, w)
+    cov_free = cov_y * (s_free[:, None] * s_free[None, :])
+    cov = jnp.zeros((P, P), p0.dtype).at[idx[:, None], idx[None, :]].set(cov_free)
+    finite = jnp.all(jnp.isfinite(res)) & jnp.all(jnp.isfinite(p))
+    converged = (sol.result == optx.RESULTS.successful) & ok & finite & well
+    return LsqFit(
+        estimate=p,
+        covariance=cov,
+        residuals=res,
+        chi2=jnp.sum(r**2),
+        converged=converged,
+        steps=sol.stats["num_steps"],
+    )
+
+
+class LinearFactor(eqx.Module):
+    """The noise-independent part of a weighted linear least-squares problem
+    `Δp = X p + c`: everything but the measured deflections.
+
+    - `design`: `(3n, q)` σ-weighted design `X/σ` (fitted columns only).
+    - `offset`: `(3n,)` σ-weighted known part `c/σ`.
+    - `solve_matrix`: `(q, 3n)` the map `G = (XᵀX)⁻¹Xᵀ` (weighted), so that the
+      estimate is `G (Δp − c)/σ`: one matrix product per noise draw.
+    - `covariance`: `(q, q)` `(XᵀWX)⁻¹`.
+    - `well_posed`: the normal matrix passed the rank test.
+    """
+
+    design: Float[Array, "m q"]
+    offset: Float[Array, " m"]
+    solve_matrix: Float[Array, "q m"]
+    covariance: Float[Array, "q q"]
+    well_posed: Bool[Array, ""]
+
+
+@eqx.filter_jit
+def linear_factor(design: Float[Array, "m q"], offset: Float[Array, " m"]) -> LinearFactor:
+    """Factor a σ-weighted linear design (see `LinearFactor`). Pure, never raises.
+    Jitted: its small dense algorithms (Jacobi eigenvalues, Cholesky) would otherwise
+    dispatch op by op (seconds per call on the host)."""
+    cov, well = covariance_from_jacobian(design)
+    G = cov @ design.T
+    return LinearFactor(design, offset, G, cov, well)
+
+
+def linear_solve_factored(
+    f: LinearFactor, weighted_target: Float[Array, " m"]
+) -> tuple[Float[Array, " q"], Float[Array, " m"]]:
+    """Estimate and σ-weighted residual `(target − X p − c)/σ` for one weighted target
+    `Δp/σ` (flattened `(3n,)`)."""
+    b = weighted_target - f.offset
+    p = f.solve_matrix @ b
+    return p, b - f.design @ p

@@ -1,0 +1,250 @@
+"""The result of an identification and its reporting: `IdentificationResult` (estimates,
+covariance, standard errors, 95 % intervals, residuals, fit statistics; table and JSON
+output), parameter-name handling and the traceable assembly `make_result` used by every
+method (`_identification/methods.py`: linear and nonlinear fits; `_identification/two_step.py`).
+
+Parameter vectors are in user units (µrad/(N·m), N/m, m; `jaxcal.get_parameters`
+order) and names carry their units (`k1_urad_per_Nm`, `Kc_N_per_m`, `s0_m`).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from .._format import format_table
+from .._parameters import parameter_units
+from .._robot import Robot
+
+__all__ = ["IdentificationResult", "Z95", "free_mask", "make_result", "resolve_name"]
+
+Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+
+
+class IdentificationResult(eqx.Module):
+    """Estimates with uncertainties and fit statistics of one identification.
+
+    Arrays (a leading batch axis under `jax.vmap`):
+
+    - `estimate` `(p,)`: fitted parameters, user units, in the order of `names`.
+    - `covariance` `(p, p)`, `std` `(p,)`, `ci95` `(p, 2)` (estimate ± 1.96 std), from
+      the stated σ (NaN if the design is rank deficient).
+    - `residuals` `(n, 3)`: measured − model deflection, m, base frame.
+    - `standardized` `(n, 3)`: residuals / σ of the row.
+    - `rms` (m) over all coordinates; `chi2_red` = Σ standardized² / `dof`.
+    - `converged`: solver success, finite model, well-posed design.
+    - `steps`: solver steps (0 for the closed-form methods).
+    - `fixed_values` `(k,)`: values of the parameters held fixed, user units.
+
+    Static: `method`, `names` (fitted parameters with units), `dof` (= 3n − p, kept
+    rows only), `fixed` (names of parameters held at the robot's value), `gross_rows`
+    (0-based rows named as gross errors, see `jaxcal._identification.gross`) and `gross_excluded`
+    (whether the estimates exclude them).
+    """
+
+    estimate: Float[Array, " p"]
+    covariance: Float[Array, "p p"]
+    std: Float[Array, " p"]
+    ci95: Float[Array, "p 2"]
+    residuals: Float[Array, "n 3"]
+    standardized: Float[Array, "n 3"]
+    rms: Float[Array, ""]
+    chi2_red: Float[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    fixed_values: Float[Array, " k"]
+    method: str = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+    dof: int = eqx.field(static=True)
+    fixed: tuple[str, ...] = eqx.field(static=True, default=())
+    gross_rows: tuple[int, ...] = eqx.field(static=True, default=())
+    gross_excluded: bool = eqx.field(static=True, default=False)
+
+    # ----- host-side reporting (not traceable; for one unbatched result) -----
+
+    def outliers(self, threshold: float = 3.0) -> list[int]:
+        """0-based rows whose largest |standardized residual| exceeds `threshold`."""
+        z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
+        return [int(i) for i in np.flatnonzero(z > threshold) if i not in self.gross_rows]
+
+    def gross_errors(self) -> list[tuple[int, float]]:
+        """`(row, largest |residual|/σ)` of the rows named as gross errors (0-based)."""
+        z = np.max(np.abs(np.asarray(self.standardized)), axis=-1)
+        return [(i, float(z[i])) for i in self.gross_rows]
+
+    def gross_report(self, ids: tuple[str, ...] = ()) -> list[str]:
+        """One line per gross error, as the command line prints them."""
+        lines = []
+        for i, z in self.gross_errors():
+            label = ids[i] if ids and ids[i] else str(i + 1)
+            if self.gross_excluded:
+                tail = "estimates below exclude it (--keep-outliers to include)"
+            else:
+                tail = "the estimates include it and are not to be trusted"
+            lines.append(f"row {label}: {z:.0f} σ, likely a gross error; {tail}")
+        return lines
+
+    def intervals95(self) -> np.ndarray:
+        """Host-side 95 % intervals `(p, 2)` for reports: every parameter here (joint
+        compliances, `Kc`, `s0`) is strictly positive, so its interval comes from the
+        log-parameter, `estimate · exp(±1.96 std/estimate)` (never below zero; close to
+        the Wald interval `ci95` when the std is small); a non-positive estimate keeps
+        the Wald interval."""
+        est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
+        wald = np.asarray(self.ci95, float)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            r = Z95 * std / est
+            log = np.stack([est * np.exp(-r), est * np.exp(r)], axis=-1)
+        return np.where((est > 0)[:, None] & np.isfinite(log), log, wald)
+
+    def undetermined(self, limit: float = 0.5) -> list[str]:
+        """Names of parameters the data leave effectively undetermined: relative
+        standard error above `limit` (50 %)."""
+        est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = std / np.abs(est)
+        return [n for n, r in zip(self.names, rel, strict=True) if not r <= limit]
+
+    def parameter(self, name: str) -> tuple[float, float]:
+        """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""
+        full = resolve_name(name, self.names)
+        i = self.names.index(full)
+        return float(self.estimate[i]), float(self.std[i])
+
+    def to_dict(self, threshold: float = 3.0, ids: tuple[str, ...] = ()) -> dict:
+        """The JSON object of the command line: method, parameters (value, std), RMS in
+        mm, reduced χ², number of rows and outlier rows (1-based, or their ids)."""
+        est, std = np.asarray(self.estimate), np.asarray(self.std)
+        params = {
+            n: {"value": float(v), "std": float(s)}
+            for n, v, s in zip(self.names, est, std, strict=True)
+        }
+        rows = self.outliers(threshold)
+        d = {
+            "method": self.method,
+            "parameters": params,
+            "rms_mm": float(self.rms) * 1e3,
+            "chi2_red": float(self.chi2_red),
+            "n_rows": int(self.residuals.shape[0]),
+            "outliers": [ids[i] if ids and ids[i] else i + 1 for i in rows],
+            # Log-parameter intervals (positive parameters), see `intervals95`.
+            "ci95": {
+                n: [float(c[0]), float(c[1])]
+                for n, c in zip(self.names, self.intervals95(), strict=True)
+            },
+            "undetermined": self.undetermined(),
+            "gross_errors": [
+                {"row": ids[i] if ids and ids[i] else i + 1, "sigma": z}
+                for i, z in self.gross_errors()
+            ],
+            "gross_errors_excluded": self.gross_excluded,
+        }
+        if self.fixed:
+            d["fixed"] = {
+                n: float(v) for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True)
+            }
+        if not bool(self.converged):
+            d["converged"] = False
+        return d
+
+    def table(self, truth: dict[str, float] | None = None) -> str:
+        """A readable table: parameter, estimate, std, 95 % interval, unit (and the true
+        value and the error in std units when `truth` maps names to values)."""
+        headers = ["parameter", "estimate", "std", "95% low", "95% high", "unit"]
+        if truth is not None:
+            headers += ["true", "error/std"]
+        rows = []
+        ci = self.intervals95()
+        for i, n in enumerate(self.names):
+            v, s = float(self.estimate[i]), float(self.std[i])
+            lo, hi = (float(x) for x in ci[i])
+            row: list[object] = [n.split("_")[0], v, s, lo, hi, parameter_units(n)]
+            if truth is not None:
+                t = truth.get(n, float("nan"))
+                row += [t, (v - t) / s if s > 0 else float("nan")]
+            rows.append(row)
+        for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True):
+            row = [n.split("_")[0] + " (fixed)", float(v), "-", "-", "-", parameter_units(n)]
+            if truth is not None:
+                row += [truth.get(n, float("nan")), "-"]
+            rows.append(row)
+        lines = [format_table(headers, rows), ""]
+        lines.append(
+            f"method {self.method}: {self.residuals.shape[0]} rows, RMS residual "
+            f"{float(self.rms) * 1e3:.4f} mm, reduced chi2 {float(self.chi2_red):.3f} "
+            f"(dof {self.dof})" + ("" if bool(self.converged) else "  [NOT CONVERGED]")
+        )
+        lines.append("95% intervals from the log-parameter (the parameters are positive).")
+        for n in self.undetermined():
+            v, s = self.parameter(n)
+            rel = f" (relative std {100 * s / abs(v):.0f} % > 50 %)" if v else ""
+            lines.append(
+                f"{n.split('_')[0]} is effectively undetermined by these data{rel}: hold it "
+                "with --fix, or measure at more q2 levels"
+            )
+        return "\n".join(lines)
+
+
+def resolve_name(name: str, names: tuple[str, ...]) -> str:
+    """Full parameter name for `name` given with or without its unit suffix."""
+    for n in names:
+        if name == n or name == n.split("_")[0]:
+            return n
+    short = ", ".join(n.split("_")[0] for n in names)
+    raise ValueError(f"unknown parameter {name!r}; expected one of {short} (or with units)")
+
+
+def free_mask(robot: Robot, free) -> tuple[bool, ...]:
+    """Normalise `free` (None, bools per physical parameter, or names) to a bool tuple
+    over `robot.parameter_names`."""
+    names = robot.parameter_names
+    if free is None:
+        return (True,) * len(names)
+    free = tuple(free)
+    if all(isinstance(f, bool | np.bool_) for f in free):
+        if len(free) != len(names):
+            raise ValueError(f"free must have {len(names)} entries ({names}), got {len(free)}")
+        return tuple(bool(f) for f in free)
+    chosen = {resolve_name(str(f), names) for f in free}
+    return tuple(n in chosen for n in names)
+
+
+def make_result(
+    method: str,
+    names_all: tuple[str, ...],
+    mask: tuple[bool, ...],
+    estimate_all: Float[Array, " P"],
+    cov_all: Float[Array, "P P"],
+    residuals: Float[Array, "n 3"],
+    sigma: Float[Array, " n"],
+    converged: Bool[Array, ""],
+    steps: Int[Array, ""] | int = 0,
+) -> IdentificationResult:
+    """Assemble an `IdentificationResult` from full-length vectors (traceable)."""
+    idx = np.flatnonzero(mask)
+    fidx = np.flatnonzero(~np.asarray(mask, bool))
+    est = estimate_all[idx]
+    cov = cov_all[np.ix_(idx, idx)]
+    std = jnp.sqrt(jnp.diag(cov))
+    z = residuals / sigma[:, None]
+    n = residuals.shape[0]
+    dof = 3 * n - len(idx)
+    return IdentificationResult(
+        estimate=est,
+        covariance=cov,
+        std=std,
+        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
+        residuals=residuals,
+        standardized=z,
+        rms=jnp.sqrt(jnp.mean(residuals**2)),
+        chi2_red=jnp.sum(z**2) / max(dof, 1),
+        converged=jnp.asarray(converged),
+        steps=jnp.asarray(steps),
+        fixed_values=estimate_all[fidx],
+        method=method,
+        names=tuple(names_all[i] for i in idx),
+        dof=dof,
+        fixed=tuple(names_all[i] for i in fidx),
+    )

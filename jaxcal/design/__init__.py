@@ -1,0 +1,38 @@
+"""Design of experiments: the measurement configurations that make the identified
+parameters most precise. Constraints and loads, the covariance criteria (trace,
+determinant, weighted, explicit parameter lists) with autodiff gradients, the continuous
+constrained optimiser, the approximate-design bound and efficiency, and discrete plans
+(random, structured, the paper's Table 5)."""
+
+from ._bound import (
+    DesignBound as DesignBound,
+    design_bound as design_bound,
+)
+from ._constraints import (
+    CONSTRAINTS as CONSTRAINTS,
+    constraint_values as constraint_values,
+    design_bounds as design_bounds,
+    design_loads as design_loads,
+)
+from ._criteria import (
+    DesignCriteria as DesignCriteria,
+    design_criteria as design_criteria,
+    design_observation as design_observation,
+)
+from ._optimise import (
+    Design as Design,
+    DesignProblem as DesignProblem,
+    design_objective as design_objective,
+    optimise_design as optimise_design,
+    rank_random_designs as rank_random_designs,
+)
+from ._plans import (
+    PAPER_TABLE5_DEG as PAPER_TABLE5_DEG,
+    feasible_q3_range as feasible_q3_range,
+    jaxcal_to_paper as jaxcal_to_paper,
+    paper_q2 as paper_q2,
+    paper_table5_plan as paper_table5_plan,
+    paper_to_jaxcal as paper_to_jaxcal,
+    random_designs as random_designs,
+    structured_design as structured_design,
+)

@@ -1,0 +1,437 @@
+"""Design of calibration experiments (paper section 5): continuous optimisation of the
+measurement configurations (random and structured plans, the paper's Table 5: `design/_plans.py`;
+the approximate-design bound a design is measured against: `design/_bound.py`).
+
+`optimise_design` optimises all `6·m` joint angles (with q2 groups: `5·m` angles plus one
+q2 per group) by BFGS (optimistix) with exact gradients from autodiff through the
+criterion, and states the result's **efficiency** against the approximate-design bound.
+
+**The default problem** is the paper's: the `aggregated` parameter set (eq. 19: one
+joint-2 compliance per q2 level, 3 levels, k3..k6; k1 with horizontal loads), the trace
+of its covariance in µrad/(N·m), on the full equilibrium model linearised at the nominal
+values, the largest test load vertical in every configuration, the q2 levels at least 20°
+apart so that the compensator can be recovered from them (two-step or nonlinear fit).
+The `physical` set (k, Kc, s0; relative errors) stays an option: there the trace is
+> 90 % the variance of Kc, which no 12-configuration design determines, and a warning
+says so. An explicit list (`parameters="k2,k3,k4"`) takes the marginal trace of those
+parameters, all still estimated.
+
+**Which model.** The criterion the optimiser minimises is the one it reports and that
+`jaxcal evaluate` uses. `model="linear"` (eq. 5, compensator folded into joint 2) is
+~100x cheaper per step and compiles in seconds, a different criterion for k2, Kc, s0.
+
+Constraints:
+
+- the box (joint limits ∩ experiment ranges) by a smooth reparameterisation
+  `q = lo + (hi − lo)·sigmoid(u)`, so it always holds;
+- the wrist-centre height and radius, and the q2 level gap, by a quadratic penalty on
+  violations of the constraint tightened by a small margin, in rounds of increasing
+  weight (each round warm-starts from the last; progress is printed per round).
+
+All starts run in one `vmap`; with `pool=N` they are the best of N random feasible
+designs (evaluated first, in one vmapped program), whose best value is reported as the
+reference. The returned design is the best *feasible* start, checked on the exact
+constraints afterwards (never assumed); `feasible=False` is reported if no start is
+feasible.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from .._io import Dataset
+from .._robot import Robot
+from ._bound import DesignBound, design_bound, has_bound
+from ._constraints import constraint_values, design_bounds, design_loads
+from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
+from ._plans import level_separation, random_designs
+from ._problem import DesignProblem, design_objective, log_value, problem_criteria
+
+__all__ = [
+    "Design",
+    "DesignProblem",
+    "design_objective",
+    "optimise_design",
+    "rank_random_designs",
+]
+
+# Wrist-constraint margin (m) of the penalised problem: the optimum of a quadratic
+# penalty violates the constraint by O(gradient/weight); optimising against a
+# constraint tightened by 2 mm leaves the final design strictly inside.
+_MARGIN = 2e-3
+_LENGTH = 0.01  # m: a 1 cm violation costs `weight` in the log-criterion
+_WEIGHTS = (1.0, 1e2, 1e4)
+_ANGLE = np.deg2rad(1.0)  # a 1° violation of the level gap costs `weight`
+_GAP_MARGIN = np.deg2rad(0.2)
+
+
+def _bounds(problem: DesignProblem, dtype):
+    lo, hi = design_bounds(problem.robot)
+    return lo.astype(dtype), hi.astype(dtype)
+
+
+def _decode(problem: DesignProblem, z) -> Float[Array, "m 6"]:
+    u, v = z
+    lo, hi = _bounds(problem, u.dtype)
+    q = lo + (hi - lo) * jax.nn.sigmoid(u)
+    g = problem.group_index
+    if g is not None:
+        q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
+        q = q.at[:, 1].set(q2[jnp.asarray(g)])
+    return q
+
+
+def _encode(problem: DesignProblem, q: np.ndarray) -> tuple[Array, Array]:
+    # Host-side inverse of `_decode` for a batch `(k, m, 6)` of starting designs (numpy:
+    # nothing to compile).
+    lo, hi = (np.asarray(b) for b in design_bounds(problem.robot))
+    t = np.clip((q - lo) / (hi - lo), 1e-6, 1 - 1e-6)
+    u = np.log(t) - np.log1p(-t)
+    g = problem.group_index
+    if g is None:
+        v = np.zeros((q.shape[0], 0))
+    else:
+        gi = np.asarray(g)
+        v = np.stack([u[:, gi == k, 1].mean(axis=1) for k in range(problem.n_groups)], 1)
+    return jnp.asarray(u), jnp.asarray(v)
+
+
+def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
+    # Per pair of q2 groups: how far (rad) they are closer than the level gap (≤ 0: ok).
+    G = problem.n_groups
+    if problem.group_index is None or G < 2 or problem.level_gap_deg <= 0:
+        return jnp.zeros((0,), v.dtype)
+    lo, hi = _bounds(problem, v.dtype)
+    q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
+    i, j = np.triu_indices(G, 1)
+    return np.deg2rad(problem.level_gap_deg) - jnp.abs(q2[i] - q2[j])
+
+
+def _penalised(z, args):
+    problem, weight = args
+    q = _decode(problem, z)
+    c = problem_criteria(problem, q)
+    viol = constraint_values(problem.robot, q)[:, 1:] + _MARGIN
+    pen = jnp.sum((jax.nn.relu(viol) / _LENGTH) ** 2)
+    gap = _gap_violation(problem, z[1]) + _GAP_MARGIN
+    pen = pen + jnp.sum((jax.nn.relu(gap) / _ANGLE) ** 2)
+    return log_value(problem, c) + weight * pen
+
+
+@eqx.filter_jit
+def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: float):
+    # One penalty round for all starts, and everything the host needs to pick the best
+    # (decoded angles, criteria, exact constraint values) from the same compiled program.
+    solver = optx.BFGS(rtol=rtol, atol=rtol)
+
+    def one(z):
+        sol = optx.minimise(
+            _penalised, solver, z, args=(problem, weight), max_steps=max_steps, throw=False
+        )
+        q = _decode(problem, sol.value)
+        return (
+            sol.value,
+            sol.stats["num_steps"],
+            q,
+            problem_criteria(problem, q),
+            constraint_values(problem.robot, q),
+            jnp.max(_gap_violation(problem, sol.value[1]), initial=-jnp.inf),
+        )
+
+    return jax.vmap(one)(z0)
+
+
+@dataclass(frozen=True)
+class Design:
+    """An optimised (or given) design.
+
+    - `q`: `(m, 6)` joint angles, rad; `force`: `(m, 3)` loads at the tool point, N.
+    - `value`: the criterion's value; `criteria`: all criteria and standard errors.
+    - `feasible`: every constraint holds (checked on the returned angles).
+    - `seconds`: wall time of the optimisation, compilation included.
+    - `history`: best feasible value after each penalty round.
+    - `model`: the observation model the criterion was optimised on.
+    - `random_best`: with `pool`, the best criterion of the random designs evaluated
+      (`value / random_best` is the gain over random designs); else `None`.
+    - `repeats`: each configuration of `q` is measured this many times (the criteria
+      count every repetition; `dataset` lists them all).
+    - `bound`: the approximate-design bound (`design_bound`), `efficiency` = bound/value.
+    """
+
+    q: np.ndarray
+    force: np.ndarray
+    criterion: str
+    parameters: str
+    value: float
+    criteria: DesignCriteria
+    feasible: bool
+    seconds: float
+    history: tuple[float, ...] = field(default=())
+    max_violation: float = 0.0
+    model: str = "full"
+    random_best: float | None = None
+    repeats: int = 1
+    bound: DesignBound | None = None
+
+    @property
+    def efficiency(self) -> float | None:
+        """`bound / value` against the approximate-design bound (`None` without one)."""
+        return None if self.bound is None else self.bound.efficiency(self.value)
+
+    def shares(self) -> dict[str, float]:
+        """Each parameter's share of the trace of the covariance (`share_of_trace`)."""
+        return share_of_trace(self.criteria)
+
+    def dataset(self, robot: Robot) -> Dataset:
+        """The design as a `Dataset` without deflections (write it with
+        `write_dataset(..., deflection=False)` and feed it to `jaxcal simulate`)."""
+        assert robot.experiment is not None
+        m, r = len(self.q), self.repeats
+        ids = tuple(
+            f"c{i + 1}" + (f"r{k + 1}" if r > 1 else "") for i in range(m) for k in range(r)
+        )
+        return Dataset.from_arrays(
+            np.repeat(np.rad2deg(self.q), r, axis=0),
+            np.repeat(self.force, r, axis=0),
+            sigma_mm=robot.experiment.noise_std * 1e3,
+            ids=ids,
+            source="jaxcal design",
+        )
+
+
+_constraints_jit = eqx.filter_jit(constraint_values)
+
+
+def _check_x64(robot: Robot) -> None:
+    if robot.compliance.dtype != jnp.float64:
+        raise ValueError(
+            "design needs float64: call jax.config.update('jax_enable_x64', True) before "
+            "loading the robot"
+        )
+
+
+@eqx.filter_jit
+def pool_values(problem: DesignProblem, q):
+    # The criterion of a batch of designs (one compiled program per problem and batch).
+    return jax.vmap(lambda a: problem_criteria(problem, a).value(problem.criterion))(q)
+
+
+def optimise_design(
+    robot: Robot,
+    m: int = 12,
+    *,
+    criterion: str = "trace",
+    parameters: str | tuple[str, ...] = "aggregated",
+    loads: str = "vertical",
+    groups: tuple[int, ...] | None = None,
+    relative: bool | None = None,
+    weights: tuple[float, float] = (0.5, 0.5),
+    focus: tuple[str, ...] | None = None,
+    starts: int = 8,
+    seed: int = 0,
+    max_steps: int = 150,
+    rtol: float = 1e-8,
+    init: np.ndarray | None = None,
+    pool: int = 0,
+    progress: bool = False,
+    model: str | None = None,
+    repeats: int = 1,
+    level_gap_deg: float = 20.0,
+    bound_pool: int = 2000,
+) -> Design:
+    """Optimise a design of `m` configurations (see module doc and `DesignProblem`).
+
+    **Arguments** (besides those of `DesignProblem`)
+
+    - `starts`: starting designs, all optimised in one `vmap`.
+    - `seed`: seed of the random designs; `init`: optional `(k, m, 6)` starting designs
+      (rad) used instead of random ones.
+    - `pool`: if positive, first draw `pool` random feasible designs
+      (`random_designs(robot, pool, m, seed)`), evaluate the criterion on all of them,
+      start from the best `starts` of them, and record the best value as
+      `Design.random_best` (the reference of the issue's "at most half of the best of
+      200 random feasible designs"). Otherwise the starts are `starts` random designs.
+    - `max_steps`, `rtol`: BFGS budget and tolerance per penalty round.
+    - `progress`: print the best feasible value after each round to stderr.
+    - `model`: the observation model the criterion is optimised on (default `"full"`;
+      `"linear"`: eq. 5, compensator folded into joint 2). Cost on 2 cores, 12
+      configurations: the full model's q-gradient is a second derivative through the
+      equilibrium (implicit function theorem), ~100x the linear model's per step and
+      ~30 s instead of ~5 s to compile (see `benchmarks/README.md`).
+    - `parameters`: `"aggregated"` (default), `"physical"`, or an explicit list of
+      physical parameters (`"k2,k3,k4"`: the criterion over exactly those, all still
+      estimated; see `resolve_parameters`).
+    - `repeats`: measure each of the `m` distinct configurations `repeats` times.
+    - `level_gap_deg`: with q2 groups, their q2 values at least this far apart (deg;
+      default 20), so that the compensator can be recovered from the aggregated
+      compliances; the bound and the random designs obey it too.
+    - `bound_pool`: candidates of the approximate-design bound (`design_bound`, with
+      the design's own configurations added); 0 skips it.
+
+    Returns the best feasible `Design` over the starts (`feasible=False` if none is).
+    """
+    _check_x64(robot)
+    t0 = time.perf_counter()
+    parameters, listed = resolve_parameters(robot, parameters)
+    if listed is not None:
+        focus = listed
+    # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
+    problem = DesignProblem(
+        robot,
+        m,
+        loads=loads,
+        parameters=parameters,
+        criterion=criterion,
+        groups=groups,
+        relative=relative,
+        weights=weights,
+        focus=focus,
+        model=model,
+        repeats=repeats,
+        level_gap_deg=level_gap_deg,
+    )
+    g = problem.group_index
+    random_best = None
+    if init is not None:
+        q0 = np.asarray(init, float).reshape(-1, m, 6)
+    elif pool > 0:
+        cand = random_designs(robot, pool, m, seed, groups=g, level_gap_deg=problem.level_gap_deg)
+        vals = np.asarray(pool_values(problem, jnp.asarray(cand)))
+        random_best = float(np.nanmin(vals))
+        q0 = cand[np.argsort(np.where(np.isfinite(vals), vals, np.inf))[:starts]]
+        if progress:
+            print(
+                f"design: best of {pool} random designs {criterion} = {random_best:.6g} "
+                f"({time.perf_counter() - t0:.1f} s)",
+                file=sys.stderr,
+            )
+    else:
+        q0 = random_designs(
+            robot,
+            starts,
+            m,
+            seed,
+            groups=g,
+            margin=_MARGIN,
+            level_gap_deg=problem.level_gap_deg + np.rad2deg(_GAP_MARGIN),
+        )
+    z = _encode(problem, q0)
+    history = []
+    best, crits, q = 0, None, None
+    for r, w in enumerate(_WEIGHTS):
+        z, steps, q, crits, cv, gv = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
+        val, cv = np.asarray(crits.value(criterion)), np.asarray(cv)
+        viol = np.maximum(cv.max(axis=(1, 2)), np.asarray(gv))
+        feas = (viol <= 1e-9) & np.isfinite(val)
+        pick = np.where(feas, val, np.inf)
+        best = int(np.argmin(pick)) if feas.any() else int(np.argmin(viol))
+        history.append(float(pick[best]))
+        if progress:
+            print(
+                f"design round {r + 1}/{len(_WEIGHTS)}: best feasible {criterion} = "
+                f"{pick[best]:.6g} ({int(feas.sum())}/{len(feas)} starts feasible, "
+                f"≤{int(np.max(steps))} BFGS steps, {time.perf_counter() - t0:.1f} s)",
+                file=sys.stderr,
+            )
+    assert crits is not None and q is not None
+    qb = np.asarray(q[best])
+    force = np.asarray(design_loads(robot, jnp.asarray(qb), loads))
+    crit = jax.tree.map(lambda x: x[best], crits)
+    names = problem.names()
+    # The groups' q2 values (rad), for the aggregated names and the level-gap check.
+    q2g = None if g is None else [qb[np.asarray(g) == k, 1].mean() for k in range(problem.n_groups)]
+    if q2g is not None and parameters == "aggregated":
+        names = design_parameter_names(
+            robot, parameters, include_k1=problem.k1, q2_values_deg=np.rad2deg(q2g)
+        )
+    crit = dataclasses.replace(crit, names=names)
+    # Checked on the returned angles, not taken from the optimiser's bookkeeping.
+    cvb = np.asarray(_constraints_jit(robot, jnp.asarray(qb)))
+    if q2g is not None and problem.n_groups > 1:
+        gap_viol = np.deg2rad(problem.level_gap_deg) - float(level_separation(q2g))
+        cvb = np.append(cvb.ravel(), gap_viol)
+    bound = None
+    if bound_pool > 0 and has_bound(problem):
+        bound = design_bound(problem, n=bound_pool, seed=seed, include=qb)
+        if progress:
+            print(
+                f"design: approximate-design bound {bound.value:.6g} over {bound.pool_size} "
+                f"candidates, efficiency {bound.efficiency(float(crit.value(criterion))):.3f} "
+                f"({time.perf_counter() - t0:.1f} s)",
+                file=sys.stderr,
+            )
+    _warn_dominant(crit, criterion, parameters)
+    return Design(
+        q=qb,
+        force=force,
+        criterion=criterion,
+        parameters=parameters,
+        value=float(crit.value(criterion)),
+        criteria=crit,
+        feasible=bool(cvb.max() <= 1e-9),
+        seconds=time.perf_counter() - t0,
+        history=tuple(history),
+        max_violation=float(cvb.max()),
+        model=problem.obs_model,
+        random_best=random_best,
+        repeats=repeats,
+        bound=bound,
+    )
+
+
+def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
+    # One parameter holding most of the trace: the design spends itself on a parameter
+    # it cannot determine (typically Kc in the physical set).
+    if criterion == "det" or not bool(c.full_rank):
+        return
+    if parameters != "physical" or not c.relative:
+        # Absolute shares (compliances only) say which compliance is largest, not which
+        # parameter the design cannot determine.
+        return
+    share = share_of_trace(c)
+    name, top = max(share.items(), key=lambda kv: kv[1])
+    if top > 0.5:
+        warnings.warn(
+            f"{name.split('_')[0]}: {100 * top:.0f} % of the trace; this design cannot "
+            "determine it; consider --parameters aggregated or more configurations",
+            stacklevel=3,
+        )
+
+
+def rank_random_designs(
+    robot: Robot,
+    n: int = 200,
+    m: int = 12,
+    *,
+    seed: int = 0,
+    groups: tuple[int, ...] | None = None,
+    level_gap_deg: float = 20.0,
+    **problem,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`n` random feasible designs of `m` configurations for a design problem (default:
+    the default problem, 3 q2 groups at least `level_gap_deg` apart), sorted by their
+    criterion, best first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further
+    `DesignProblem` settings (`parameters`, `criterion`, `model`, ...). The reference
+    designs a design is compared with (the best, the median)."""
+    _check_x64(robot)
+    parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
+    if listed is not None:
+        problem["focus"] = listed
+    P = DesignProblem(
+        robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem
+    )
+    q = random_designs(robot, n, m, seed, groups=P.group_index, level_gap_deg=level_gap_deg)
+    v = np.asarray(pool_values(P, jnp.asarray(q)))
+    order = np.argsort(np.where(np.isfinite(v), v, np.inf), kind="stable")
+    return q[order], v[order]

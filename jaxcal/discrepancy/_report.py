@@ -1,0 +1,283 @@
+"""Results and statistics of the discrepancy workflow (`jaxcal.discrepancy._discover`): the
+report of one data set, one candidate's fit, and the gap statistics (χ² survival
+function, residual structure by load and configuration, leave-one-configuration-out
+PRESS residuals), and the search for measurements that would separate two
+candidates."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import jax.numpy as jnp
+import jax.scipy.special as jsp
+import numpy as np
+
+from .._io import Dataset
+from .._model.candidates import Candidate
+from ._supermodel import SuperModel
+
+__all__ = [
+    "DiscoveryReport",
+    "CandidateResult",
+    "chi2_sf",
+    "DECISIVE_BIC",
+]
+
+#: ΔBIC a candidate needs to be chosen (Kass & Raftery: > 10 is "very strong").
+DECISIVE_BIC = 10.0
+
+
+def chi2_sf(x: float, dof: float) -> float:
+    """Survival function of the χ² distribution, `Q(dof/2, x/2)` (jax.scipy, float64)."""
+    if dof <= 0:
+        return float("nan")
+    return float(jsp.gammaincc(jnp.asarray(dof / 2.0), jnp.asarray(max(x, 0.0) / 2.0)))
+
+
+@dataclass
+class CandidateResult:
+    """One candidate's fit: `delta_bic` (nominal BIC − candidate BIC, > 0 favours the
+    candidate), `chi2`, `rms_after_mm`, `params`/`stds` (user units), `physical`, and
+    `refined` (full nonlinear fit; otherwise the score/linearised values)."""
+
+    candidate: Candidate
+    delta_bic: float
+    chi2: float
+    rms_after_mm: float
+    params: np.ndarray
+    stds: np.ndarray
+    physical: bool
+    refined: bool
+    lr_p_value: float = float("nan")
+
+    @property
+    def label(self) -> str:
+        return self.candidate.label
+
+    @property
+    def eligible(self) -> bool:
+        """Whether it can be chosen: fully fitted, with a usable fit and physical values."""
+        return self.refined and self.physical and bool(np.isfinite(self.chi2))
+
+
+@dataclass
+class DiscoveryReport:
+    """Result of `discover` for one data set (numbers in mm where named so).
+
+    `effect` is the chosen candidate's name or `"none"`; `joint` its joint or None.
+    `before`/`after` statistics refer to the nominal model and to the model with the
+    best candidate (after = before when `effect == "none"`, except that `delta_bic` and
+    the held-out error of the best candidate are still given for inspection).
+    """
+
+    effect: str
+    joint: int | None
+    words: str
+    params: dict[str, tuple[float, float]]
+    n_rows: int
+    dof_before: int
+    dof_after: int
+    rms_before_mm: float
+    rms_after_mm: float
+    rms_axis_before_mm: tuple[float, ...]
+    rms_axis_after_mm: tuple[float, ...]
+    chi2_red_before: float
+    chi2_red_after: float
+    p_value_before: float
+    p_value_after: float
+    delta_bic: float
+    lr_p_value: float
+    heldout_rms_before_mm: float
+    heldout_rms_after_mm: float
+    best: str
+    candidates: list[CandidateResult]
+    ambiguous_with: list[str]
+    separating: list[dict] = field(default_factory=list)
+    structure_before: dict = field(default_factory=dict)
+    structure_after: dict = field(default_factory=dict)
+    residuals_before: np.ndarray | None = None
+    residuals_after: np.ndarray | None = None
+    nominal_params: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: Whether the nominal fit met its tolerances; if not its χ² is too high and ΔBIC
+    #: may be overstated (the summary says so).
+    nominal_converged: bool = True
+
+    def to_json(self) -> dict:
+        """The JSON object of `jaxcal discover --json`."""
+        return {
+            "effect": self.effect,
+            "joint": self.joint,
+            "rms_before_mm": self.rms_before_mm,
+            "rms_after_mm": self.rms_after_mm,
+            "chi2_red_before": self.chi2_red_before,
+            "chi2_red_after": self.chi2_red_after,
+            "delta_bic": self.delta_bic,
+            "heldout_rms_before_mm": self.heldout_rms_before_mm,
+            "heldout_rms_after_mm": self.heldout_rms_after_mm,
+            "candidates": [
+                {
+                    "effect": c.candidate.name,
+                    "joint": c.candidate.joint,
+                    "delta_bic": c.delta_bic,
+                    "rms_after_mm": c.rms_after_mm,
+                }
+                for c in self.candidates
+            ],
+        }
+
+    def summary(self) -> str:
+        """A few lines in words."""
+        lines = []
+        if self.effect == "none":
+            lines.append(
+                f"No missing effect: the nominal model fits to the noise "
+                f"(χ²_red = {self.chi2_red_before:.3f}, p = {self.p_value_before:.3g}); best "
+                f"candidate {self.best} has ΔBIC = {self.delta_bic:.1f} (< {DECISIVE_BIC:g} "
+                "or no held-out gain)."
+            )
+        else:
+            lines.append(f"Missing effect: {self.words}.")
+            lines.append(
+                f"Gap: RMS {self.rms_before_mm:.4f} → {self.rms_after_mm:.4f} mm, χ²_red "
+                f"{self.chi2_red_before:.3f} → {self.chi2_red_after:.3f}, ΔBIC = "
+                f"{self.delta_bic:.1f}, held-out RMS {self.heldout_rms_before_mm:.4f} → "
+                f"{self.heldout_rms_after_mm:.4f} mm."
+            )
+        if not self.nominal_converged:
+            lines.append(
+                "Warning: the nominal fit stopped before meeting its tolerances; its χ² may "
+                "be too high and every ΔBIC overstated."
+            )
+        if self.ambiguous_with:
+            lines.append(
+                f"Cannot be told apart from {', '.join(self.ambiguous_with)} with these data "
+                "(ΔBIC within 10)."
+            )
+            for s in self.separating[:3]:
+                lines.append(
+                    f"  measure configuration {s['configuration']} (row {s['row']}) with load "
+                    f"{s['load']}: predictions differ by {s['difference_sigma']:.1f} σ"
+                )
+        return "\n".join(lines)
+
+    def plot(self, fig=None):
+        """Residuals (mm) per row and axis, before and after, ±2σ band; returns the
+        figure (matplotlib)."""
+        import matplotlib.pyplot as plt
+
+        if fig is None:
+            fig = plt.figure(figsize=(10, 5.5))
+        axes = fig.subplots(2, 1, sharex=True, sharey=True)
+        for ax, res, title in (
+            (axes[0], self.residuals_before, "nominal model"),
+            (
+                axes[1],
+                self.residuals_after,
+                "with " + (self.best if self.effect == "none" else self.words.split(":")[0]),
+            ),
+        ):
+            if res is None:
+                continue
+            res = np.asarray(res) * 1e3
+            n = res.shape[0]
+            for k, (c, lab) in enumerate(zip("rgb", "xyz", strict=True)):
+                ax.plot(np.arange(n) + (k - 1) * 0.2, res[:, k], "o", ms=3, color=c, label=lab)
+            s = 2 * self._sigma_mm
+            ax.axhspan(-s, s, color="0.9", zorder=0)
+            ax.axhline(0, color="0.5", lw=0.5)
+            ax.set_ylabel("residual (mm)")
+            ax.set_title(f"{title}: RMS {np.sqrt(np.mean(res**2)):.4f} mm", fontsize=9)
+        axes[0].legend(ncol=3, fontsize=8, loc="upper right")
+        axes[1].set_xlabel("row")
+        fig.tight_layout()
+        return fig
+
+    _sigma_mm: float = 0.02
+
+
+# -- statistics ----------------------------------------------------------------------------
+
+
+def residual_structure(
+    res: np.ndarray, sigma: np.ndarray, data: Dataset, groups: np.ndarray
+) -> dict:
+    """Normalised RMS (in σ) of the residuals by load class and by configuration, and
+    the correlation of |residual| with load magnitude."""
+    z = res / sigma[:, None]
+    f = np.asarray(data.force)
+    fmag = np.linalg.norm(f, axis=1)
+    vertical = np.abs(f[:, 2]) > 0.9 * np.maximum(fmag, 1e-300)
+    out: dict = {}
+    levels = np.unique(np.round(fmag[vertical], 3)) if vertical.any() else []
+    for lv in levels:
+        m = vertical & (np.abs(np.round(fmag, 3) - lv) < 1e-6)
+        out[f"vertical {lv:.0f} N"] = float(np.sqrt(np.mean(z[m] ** 2)))
+    if (~vertical).any():
+        out["horizontal/other"] = float(np.sqrt(np.mean(z[~vertical] ** 2)))
+    per_conf = [float(np.sqrt(np.mean(z[groups == g] ** 2))) for g in range(groups.max() + 1)]
+    out["worst configuration"] = int(np.argmax(per_conf))
+    out["worst configuration rms_sigma"] = max(per_conf)
+    zn = np.linalg.norm(z, axis=1)
+    if np.std(fmag) > 0 and np.std(zn) > 0:
+        out["corr(|r|, |F|)"] = float(np.corrcoef(zn, fmag)[0, 1])
+    q2 = np.asarray(data.q)[:, 1]
+    if np.std(q2) > 0 and np.std(zn) > 0:
+        out["corr(|r|, q2)"] = float(np.corrcoef(zn, q2)[0, 1])
+    return out
+
+
+def rms_mm(res_m: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(res_m) ** 2)) * 1e3)
+
+
+def separating_configurations(
+    sm: SuperModel, data: Dataset, rep: DiscoveryReport, deflections
+) -> None:
+    """Measurements that would tell the best candidate from its runner-up: each model's
+    prediction for the data's configurations under alternative loads (horizontal ±x,
+    ±y and vertical at the data's largest force, vertical at half of it); the largest
+    differences in units of σ."""
+    other = rep.ambiguous_with[0]
+    pa = rep._all_params[rep.best]  # type: ignore[attr-defined]
+    pb = rep._all_params[other]  # type: ignore[attr-defined]
+    fmax = float(np.max(np.linalg.norm(np.asarray(data.force), axis=1)))
+    loads = {
+        "+x": (fmax, 0, 0),
+        "-x": (-fmax, 0, 0),
+        "+y": (0, fmax, 0),
+        "-y": (0, -fmax, 0),
+        "-z": (0, 0, -fmax),
+        "-z/2": (0, 0, -fmax / 2),
+    }
+    sigma_mm = rep._sigma_mm
+    found = []
+    design, groups = sm.design, sm.groups
+    try:
+        for name, f in loads.items():
+            alt = Dataset(
+                data.q,
+                jnp.broadcast_to(jnp.asarray(f, float), data.force.shape),
+                jnp.zeros_like(data.moment),
+                None,
+                data.sigma,
+            )
+            sm.set_design(alt)
+            dp, ok = sm.predict(np.stack([pa, pb]))
+            diff = np.linalg.norm(dp[0] - dp[1], axis=1) * 1e3 / sigma_mm
+            for g in np.unique(sm.groups):
+                row = int(np.flatnonzero(sm.groups == g)[0])
+                found.append(
+                    {
+                        "configuration": int(g),
+                        "row": row + 1,
+                        "q_deg": np.rad2deg(np.asarray(data.q[row])).round(2).tolist(),
+                        "load": f"{name} {fmax:.0f} N"
+                        if "/" not in name
+                        else f"-z {fmax / 2:.0f} N",
+                        "difference_sigma": float(diff[row]),
+                    }
+                )
+    finally:
+        sm.design, sm.groups = design, groups
+    found.sort(key=lambda d: -d["difference_sigma"])
+    rep.separating = found[:5]

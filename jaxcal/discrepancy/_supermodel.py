@@ -1,0 +1,400 @@
+"""One model that holds the nominal robot and every candidate effect at once, so that
+one compiled function serves the nominal fit, every candidate fit, predictions and
+screening Jacobians.
+
+Every candidate is "absent" at parameter value 0, so the nominal model *is* the super
+model with all candidate parameters at 0, and a candidate fit frees the nominal
+parameters plus that candidate's. Fits are optimistix Levenberg–Marquardt
+(`optx.least_squares`, `SmallQR` linear solves) on the full equilibrium model
+(`jaxcal._model.equilibrium.measured_deflections`, the predictor identify uses too:
+implicit-function derivatives whose linear solve never raises), `jax.vmap`-ed over a
+batch of fits (seeds × candidates; `chunk_size()` members per call). Which parameters
+a fit frees is *traced* (indices of `SLOTS` candidate parameters and a 0/1 mask), so
+one compile per robot structure and design shape serves everything.
+
+Why not `jaxcal.nonlinear_fit`: its free set is static (one compile per candidate,
+~17, each minutes on two cores) and its compiled program holds four copies of the model
+(LM step, final prediction, two final Jacobians); this loop holds two (the LM step's
+residual-and-Jacobian and the final one) and the free set is data.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from .._batching import map_in_chunks
+from .._io import Dataset
+from .._linalg.dense import SmallQR
+from .._model.candidates import Candidate
+from .._model.equilibrium import measured_deflections, with_unloaded
+from .._robot import URAD, Robot
+
+__all__ = ["SuperModel", "BatchFit", "configuration_groups"]
+
+
+def chunk_size() -> int:
+    """Batch members per call of the compiled functions (batches are padded to a
+    multiple, so one compile serves every batch size). Under `vmap` a batch of fits
+    steps until its slowest member stops; on a CPU a fit costs the same per LM step
+    alone or in a batch (measured: 16 ms per member-step at 1, 2 or 8), so one member
+    per call wastes nothing; an accelerator gains from width."""
+    return 1 if jax.default_backend() == "cpu" else 8
+
+
+_COMPILED: dict = {}
+#: Candidate-parameter slots of one fit: the most parameters a candidate has (tracker 3).
+SLOTS = 3
+#: LM tolerances on the scaled parameters u = Δp/scale (O(1)), as in `jaxcal._identification.lsq`: a
+#: change of 1e-5 of a parameter's typical size is far below its statistical uncertainty.
+RTOL = ATOL = 1e-5
+#: Default LM step budget of a fit (fits along the flat (Kc, Kc·s0) valley of a
+#: joint-2 dead band need 70–130 steps; fits that exhaust it are flagged, not converged).
+MAX_STEPS = 128
+#: LM steps per call of the compiled fit (static: one value, one compile); a member
+#: with a larger budget is continued from where it stopped (LM's damping restarts,
+#: which costs steps: calls of 16 steps left 4 of 48 nominal fits unconverged after 128
+#: steps that need 32–39 in one call).
+STEPS_PER_CALL = MAX_STEPS
+
+
+def configuration_groups(q) -> np.ndarray:
+    """Index of each row's configuration: rows with the same q (to 1e-9 rad) share one."""
+    key = np.round(np.asarray(q, float), 9)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    return inv.reshape(-1)
+
+
+class BatchFit(eqx.Module):
+    """Host-side result of a batch of fits (numpy arrays, batch first).
+
+    `params` (B, P) user units; `free` (B, P) bool; `chi2` (B,); `residuals` (B, n, 3) m
+    measured − model; `jac` (B, 3n, P) σ-weighted Jacobian of the *model* at the optimum
+    (free columns; every column for `SuperModel.jacobian`); `cov` (B, P, P) `(JᵀJ)⁻¹`
+    over the free parameters (zeros elsewhere, NaN if rank deficient); `steps` (B,).
+
+    Flags (B,): `converged` LM met its tolerances within the step budget; `valid` every
+    equilibrium at the result converged and the residuals are finite (χ² is a value of
+    the model); `well` the Jacobian has full rank (the covariance exists); `ok` all three.
+    A valid, well-posed fit that ran out of steps still bounds the minimum χ² from above.
+    """
+
+    params: np.ndarray
+    free: np.ndarray
+    chi2: np.ndarray
+    residuals: np.ndarray
+    jac: np.ndarray
+    cov: np.ndarray
+    steps: np.ndarray
+    converged: np.ndarray
+    valid: np.ndarray
+    well: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.converged & self.valid & self.well
+
+
+class SuperModel:
+    """The nominal robot plus `candidates`, with a flat parameter vector in user units:
+    `k1..k6` (µrad/(N·m)), then `Kc` (N/m) and `Kc·s0` (N) if the robot has a compensator
+    (the pair in which the compensator energy is linear), then each candidate's
+    parameters in order."""
+
+    def __init__(self, robot: Robot, candidates: tuple[Candidate, ...], data: Dataset):
+        self.robot = robot
+        self.candidates = tuple(candidates)
+        names = [f"k{i}_urad_per_Nm" for i in range(1, 7)]
+        start = list(np.asarray(robot.compliance) / URAD)
+        if robot.has_compensator:
+            names += ["Kc_N_per_m", "Kc_s0_N"]
+            start += [float(robot.Kc), float(robot.Kc * robot.s0)]
+        self.n_nominal = len(names)
+        self.slices: list[slice] = []
+        for c in self.candidates:
+            n0 = len(names)
+            names += [f"{c.label}.{p}" for p in c.param_names]
+            start += [0.0] * c.n_params
+            self.slices.append(slice(n0, len(names)))
+        self.names = tuple(names)
+        self.start = np.asarray(start, float)
+        nom_scale = np.abs(self.start[: self.n_nominal])
+        cand_scale = [s for c in self.candidates for s in c.scale]
+        self.scale = np.concatenate([nom_scale, np.asarray(cand_scale, float)])
+        self.n = len(data)
+        self.use_moment = data.has_moments
+        self.set_design(data)
+        # Compiled functions are shared by every SuperModel with the same robot
+        # structure, candidate list and moment use (robot values and the design are
+        # arguments); shapes (rows, configurations) are keyed by jit itself.
+        self._key = (
+            jax.tree_util.tree_structure(robot),
+            tuple(c.label for c in self.candidates),
+            self.use_moment,
+        )
+
+    def set_design(self, data: Dataset) -> None:
+        """Use the configurations and loads of `data` (same number of rows and of
+        distinct configurations keeps the compiled functions)."""
+        if len(data) != self.n:
+            raise ValueError(f"data must have {self.n} rows, got {len(data)}")
+        inv = configuration_groups(data.q)
+        first = np.array([np.flatnonzero(inv == g)[0] for g in range(inv.max() + 1)])
+        self.groups = inv
+        q_unique = jnp.asarray(np.asarray(data.q)[first])
+        self.design = (*with_unloaded(data.q, data.force, data.moment, q_unique), jnp.asarray(inv))
+
+    # -- the model ---------------------------------------------------------------------
+
+    def to_robot(self, p: Float[Array, " P"], robot: Robot | None = None) -> Robot:
+        """The robot (with its candidate effects) for a parameter vector `p`."""
+        base = self.robot if robot is None else robot
+        r = eqx.tree_at(lambda r: r.compliance, base, p[:6] * URAD)
+        if base.has_compensator:
+            r = eqx.tree_at(lambda r: (r.Kc, r.s0), r, (p[6], p[7] / p[6]))
+        effects = tuple(c.make(p[s]) for c, s in zip(self.candidates, self.slices, strict=True))
+        return eqx.tree_at(lambda r: r.effects, r, base.effects + effects)
+
+    def _predict(self, robot, design, p):
+        """`((n, 3) deflections m, (n,) ok)` of the full model with effects
+        (`measured_deflections`: one vmapped solve of every equilibrium; implicit-function
+        derivatives whose linear solve never raises, so a failed LM trial point is a
+        flag, not an exception under `vmap`)."""
+        q_all, force_all, moment_all, inv = design
+        m_all = moment_all if self.use_moment else None
+        return measured_deflections(self.to_robot(p, robot), q_all, force_all, m_all, inv)
+
+    def _compiled(self):
+        if self._key not in _COMPILED:
+            _COMPILED[self._key] = eqx.filter_jit(self._batched)
+        return _COMPILED[self._key]
+
+    def _one(self, robot, design, scale, p0, sel, mask, target, sigma, fit, max_steps):
+        """One fit (or, with `fit` False, one evaluation) of u = (nominal parameters,
+        the `SLOTS` parameters at indices `sel`), `mask` marking which move.
+
+        Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), solved, valid, steps)`;
+        `Jw` is the σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the
+        result."""
+        nn = self.n_nominal
+        sc = jnp.concatenate([scale[:nn], scale[sel]])
+
+        def embed(u, m):
+            d = m * sc * u
+            return p0.at[:nn].add(d[:nn]).at[sel].add(d[nn:])
+
+        def weighted(u, m):
+            dp, ok = self._predict(robot, design, embed(u, m))
+            return ((target - dp) / sigma[:, None]).reshape(-1), ok
+
+        def r_and_jac(u, m):
+            # Forward mode, one JVP per fitted parameter (≤ 11): the Jacobian is
+            # materialised once per LM step, so LM's linearisation is a plain matrix
+            # product (transposing through the equilibrium's inner solves is not needed).
+            f = lambda v: weighted(v, m)
+            r, J, ok = jax.vmap(
+                lambda e: jax.jvp(f, (u,), (e,), has_aux=True), out_axes=(None, 1, None)
+            )(jnp.eye(u.shape[0], dtype=u.dtype))
+            return r, jnp.where(jnp.isfinite(J), J, 0.0), ok
+
+        @jax.custom_jvp
+        def residual(u):
+            return weighted(u, mask)[0]
+
+        @residual.defjvp
+        def _residual_jvp(primals, tangents):
+            (u,), (t,) = primals, tangents
+            r, J, _ = r_and_jac(u, mask)
+            return r, J @ t
+
+        u0 = jnp.zeros(nn + SLOTS, p0.dtype)
+
+        def run_fit(_):
+            # Householder QR in plain jnp (`SmallQR`): these fits run vmapped and batched
+            # LAPACK kernels can deadlock XLA's CPU pool (see `jaxcal._linalg.dense`).
+            solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL, linear_solver=SmallQR())
+            sol = optx.least_squares(
+                lambda u, _: residual(u),
+                solver,
+                u0,
+                max_steps=max_steps,
+                throw=False,
+                options={"jac": "fwd"},
+            )
+            ok = sol.result == optx.RESULTS.successful
+            return sol.value, ok, jnp.asarray(sol.stats["num_steps"], jnp.int32)
+
+        def no_fit(_):
+            return u0, jnp.array(True), jnp.array(0, dtype=jnp.int32)
+
+        # `fit` is one scalar for the whole batch (not vmapped), so this stays a real
+        # branch: evaluations (predictions, Jacobians for screening) share the compile.
+        u, solved, steps = jax.lax.cond(fit, run_fit, no_fit, None)
+        # One evaluation at the result: the model's flags do not depend on the mask.
+        r, Jw, ok = r_and_jac(u, jnp.ones_like(mask))
+        # J is of the residual (target − model)/σ; the model's is its negative.
+        Jw = -Jw / sc[None, :]
+        res = r.reshape(-1, 3) * sigma[:, None]
+        valid = jnp.all(ok) & jnp.all(jnp.isfinite(r))
+        return embed(u, mask), res, jnp.sum(r**2), Jw, solved, valid, steps
+
+    def _batched(self, robot, design, scale, P0, SEL, MASK, T, S, fit, max_steps):
+        return jax.vmap(
+            lambda p, s_, m, t, s: self._one(robot, design, scale, p, s_, m, t, s, fit, max_steps)
+        )(P0, SEL, MASK, T, S)
+
+    def _call(self, start, sel, mask, target, sigma, fit: bool):
+        fn = self._compiled()
+        scale = jnp.asarray(self.scale)
+        out = map_in_chunks(
+            lambda P0, SEL, M, T, S: fn(
+                self.robot, self.design, scale, P0, SEL, M, T, S, jnp.asarray(fit), STEPS_PER_CALL
+            ),
+            start.shape[0],
+            chunk_size(),
+            start,
+            sel,
+            mask,
+            target,
+            sigma,
+        )
+        return tuple(np.asarray(x) for x in out)
+
+    def _default_sel(self, B: int, chosen=()) -> np.ndarray:
+        """Slot indices: the `chosen` candidate parameters, padded with other distinct
+        parameter indices (masked, so they never move)."""
+        nn, P = self.n_nominal, len(self.names)
+        pool = [i for i in range(nn, P) if i not in chosen]
+        pool += list(range(nn))  # tiny supermodels: fall back to nominal indices
+        sel = list(chosen) + pool[: SLOTS - len(chosen)]
+        return np.tile(np.asarray(sel, int), (B, 1))
+
+    def predict(self, params) -> tuple[np.ndarray, np.ndarray]:
+        """Model deflections (B, n, 3) m and flags (B,) for parameter vectors (B, P)."""
+        params = np.atleast_2d(np.asarray(params, float))
+        B, nn = params.shape[0], self.n_nominal
+        out = self._call(
+            params,
+            self._default_sel(B),
+            np.zeros((B, nn + SLOTS)),
+            np.zeros((B, self.n, 3)),
+            np.ones((B, self.n)),
+            fit=False,
+        )
+        return -out[1], out[5]
+
+    def jacobian(self, params, sigma) -> np.ndarray:
+        """σ-weighted Jacobian of the model w.r.t. *every* parameter, (B, 3n, P), at
+        parameter vectors (B, P); `sigma` (B, n) m."""
+        params = np.atleast_2d(np.asarray(params, float))
+        B, nn, P = params.shape[0], self.n_nominal, len(self.names)
+        sigma = np.broadcast_to(np.asarray(sigma, float), (B, self.n))
+        groups = [list(range(i, min(i + SLOTS, P))) for i in range(nn, P, SLOTS)] or [[]]
+        rows = [(b, g) for b in range(B) for g in groups]
+        sel = np.concatenate([self._default_sel(1, tuple(g)) for _, g in rows])
+        out = self._call(
+            params[[b for b, _ in rows]],
+            sel,
+            np.zeros((len(rows), nn + SLOTS)),
+            np.zeros((len(rows), self.n, 3)),
+            sigma[[b for b, _ in rows]],
+            fit=False,
+        )
+        J = np.zeros((B, 3 * self.n, P))
+        for j, (b, g) in enumerate(rows):
+            J[b][:, :nn] = out[3][j][:, :nn]
+            J[b][:, g] = out[3][j][:, nn : nn + len(g)]
+        return J
+
+    # -- fitting -----------------------------------------------------------------------
+
+    def fit(
+        self,
+        start: np.ndarray,
+        free: np.ndarray,
+        target: np.ndarray,
+        sigma: np.ndarray,
+        *,
+        max_steps: int = MAX_STEPS,
+    ) -> BatchFit:
+        """Batched fits: optimistix Levenberg–Marquardt of the nominal parameters plus,
+        per member, the (at most `SLOTS`) parameters marked in `free` beyond the nominal
+        ones (every member must free the nominal parameters). The free set is a traced
+        mask, so one compile serves the nominal fit and every candidate.
+
+        `start` (B, P) or (P,) user units; `free` (B, P) or (P,) bool; `target`
+        (B, n, 3) m; `sigma` (B, n) or (n,) m; `max_steps` the LM step budget of each
+        member, in whole calls of `STEPS_PER_CALL` steps (rounded up): a member that has
+        not met the tolerances after a call is continued from where it stopped until it
+        does or its budget is spent, so the budget costs no compile.
+        """
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+        target = np.asarray(target, float)
+        B = target.shape[0]
+        P = len(self.names)
+        start = np.array(np.broadcast_to(start, (B, P)), float)
+        free = np.array(np.broadcast_to(free, (B, P)), bool)
+        sigma = np.array(np.broadcast_to(sigma, (B, self.n)), float)
+        nn = self.n_nominal
+        if not free[:, :nn].all():
+            raise ValueError("free must include every nominal parameter")
+        extra = free[:, nn:].sum(axis=1)
+        if extra.max(initial=0) > SLOTS:
+            raise ValueError(f"at most {SLOTS} candidate parameters can be freed per fit")
+        sel = np.concatenate(
+            [self._default_sel(1, tuple(np.flatnonzero(free[b, nn:]) + nn)) for b in range(B)]
+        )
+        mask = np.zeros((B, nn + SLOTS))
+        mask[:, :nn] = 1.0
+        mask[:, nn:] = np.arange(SLOTS)[None, :] < extra[:, None]
+        out = [np.array(x) for x in self._call(start, sel, mask, target, sigma, fit=True)]
+        while True:
+            again = np.flatnonzero(~out[4] & out[5] & (out[6] < max_steps))
+            if not again.size:
+                break
+            more = self._call(
+                out[0][again], sel[again], mask[again], target[again], sigma[again], fit=True
+            )
+            steps_before = out[6][again]
+            for k, x in enumerate(more):
+                out[k][again] = x
+            out[6][again] += steps_before
+        p, res, chi2, Jw, solved, valid, steps = out
+        jac = np.zeros((B, 3 * self.n, P))
+        cov = np.zeros((B, P, P))
+        well = np.zeros(B, bool)
+        for b in range(B):
+            cols = np.concatenate([np.arange(nn), sel[b][: extra[b]]]).astype(int)
+            jb = np.concatenate([Jw[b][:, :nn], Jw[b][:, nn : nn + extra[b]]], axis=1)
+            jac[b][:, cols] = jb
+            c, w = _covariance(jb)
+            cov[b][np.ix_(cols, cols)] = c
+            well[b] = w
+        return BatchFit(p, free, chi2, res, jac, cov, steps, solved, valid, well)
+
+
+#: Relative eigenvalue floor of the unit-diagonal normal matrix below which a fit is
+#: rank deficient (float64 round-off ~1e-16; four decades of margin).
+RCOND = 1e-12
+
+
+def _covariance(J: np.ndarray) -> tuple[np.ndarray, bool]:
+    """`(JᵀJ)⁻¹` on the host (numpy, outside jit) and whether it is well posed: the
+    Jacobi-scaled normal matrix must pass the eigenvalue test; never inverts a singular
+    matrix (NaN instead)."""
+    N = J.T @ J
+    d = np.sqrt(np.diag(N))
+    if not np.all(d > 0) or not np.all(np.isfinite(N)):
+        return np.full(N.shape, np.nan), False
+    Ns = N / np.outer(d, d)
+    lam = np.linalg.eigvalsh(Ns)
+    if lam[0] <= RCOND * lam[-1]:
+        return np.full(N.shape, np.nan), False
+    L = np.linalg.cholesky(Ns)
+    Linv = np.linalg.solve(L, np.eye(len(d)))
+    return (Linv.T @ Linv) / np.outer(d, d), True

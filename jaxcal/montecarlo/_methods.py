@@ -1,0 +1,146 @@
+"""Adapters from the identification methods to the per-trial function a Monte-Carlo
+study vmaps: `fit(deflection (n, 3) m, sigma (n,) m) -> (estimate, std, ci_lo, ci_hi,
+ok)`, plus the parameter names and their true values.
+
+The identification functions of `jaxcal._identification.methods` are used when present; they
+are pure in the deflections, so under `jax.vmap` everything that depends only on the
+design (observation matrices, factorisations) is computed once per chunk, not per
+trial.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import Dataset
+from .._model.linear import joint_stiffness
+from .._parameters import get_parameters
+from .._robot import URAD, Robot
+
+__all__ = ["TrialFit", "trial_fit", "true_values"]
+
+_AGG = re.compile(r"^k2@(-?[0-9.eE+-]+)deg_urad_per_Nm$")
+
+
+class TrialFit(NamedTuple):
+    """`fit(d, sigma, force, moment) -> (estimate, std, ci_lo, ci_hi, ok)` for one
+    trial (deflections, σ, loads traced: one compiled study serves any load level);
+    `names` and `true` values of the estimated parameters; the design's `force` and
+    `moment`; `unidentifiable()` names the parameters the design cannot determine
+    (called only when the noise-free fit fails)."""
+
+    names: tuple[str, ...]
+    true: np.ndarray
+    fit: Callable
+    unidentifiable: Callable[[], tuple[str, ...]] = lambda: ()
+    force: np.ndarray | None = None
+    moment: np.ndarray | None = None
+
+
+def null_space_names(
+    robot: Robot, design: Dataset, names: Sequence[str], rcond: float = 1e-10
+) -> tuple[str, ...]:
+    """Parameters among `names` (physical ones) that the design cannot determine: those
+    with a component above 0.1 in a null vector of the column-normalised Jacobian of the
+    full-model deflections (singular value below `rcond` of the largest)."""
+    from .._model.observation import observation_physical
+
+    phys = list(robot.parameter_names)
+    cols = [phys.index(n) for n in names if n in phys]
+    if not cols:
+        return ()
+    J = np.asarray(observation_physical(robot, design)).reshape(-1, len(phys))[:, cols]
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms == 0
+    Js = J / np.where(zero, 1.0, norms)
+    _, s, vt = np.linalg.svd(Js, full_matrices=True)
+    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
+    null = vt[s < rcond * max(s.max(), 1e-300)]
+    bad = zero | (np.abs(null) > 0.1).any(axis=0) if null.size else zero
+    return tuple(phys[c] for c, b in zip(cols, bad, strict=True) if b)
+
+
+def true_values(robot: Robot, design: Dataset, names: Sequence[str]) -> np.ndarray:
+    """True values of parameters named as the identification names them: physical
+    parameters from the robot; aggregated joint-2 compliances `k2@<q2>deg_urad_per_Nm`
+    as `1/K_θ2^Σ(q2)` of eq. (10) at the design's q2 value closest to `<q2>`."""
+    phys = dict(zip(robot.parameter_names, np.asarray(get_parameters(robot)), strict=True))
+    q2 = np.unique(np.asarray(design.q[:, 1]))
+    out = []
+    for n in names:
+        if n in phys:
+            out.append(float(phys[n]))
+            continue
+        m = _AGG.match(n)
+        if m is None:
+            raise ValueError(f"no true value known for parameter {n!r}")
+        target = np.deg2rad(float(m.group(1)))
+        qv = q2[np.argmin(np.abs(q2 - target))]
+        q = jnp.zeros(6).at[1].set(qv)
+        out.append(float(1.0 / joint_stiffness(robot, q)[1] / URAD))
+    return np.asarray(out, np.float64)
+
+
+def _from_result(r):
+    ci = r.ci95
+    return r.estimate, r.std, ci[:, 0], ci[:, 1], jnp.all(jnp.asarray(r.converged))
+
+
+def trial_fit(
+    robot: Robot,
+    design: Dataset,
+    method: str,
+    clean,
+    *,
+    free: Sequence[str] | None = None,
+) -> TrialFit:
+    """The per-trial identification of `method` for `design` (deflections replaced per
+    trial). Checks identifiability once, on the design, so a bad design fails before any
+    trial runs (the identification names the unidentifiable parameters)."""
+    from .._identification import methods as ident
+    from .._identification.two_step import fit_two_step
+
+    kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
+    fitters = {
+        "linear": ident.fit_linear,
+        "two-step": fit_two_step,
+        "nonlinear": ident.fit_nonlinear,
+    }
+    if method not in fitters:
+        raise ValueError(f"unknown method {method!r}; expected one of {sorted(fitters)}")
+    base = fitters[method]
+
+    # A host (numpy) copy of q: under `jit` closed-over jax arrays become tracers, and
+    # the identification groups rows by q2 on the host. Loads may be traced.
+    q, f, m = (np.asarray(a) for a in (design.q, design.force, design.moment))
+
+    def _data(d, sigma, force=f, moment=m) -> Dataset:
+        return Dataset(q, force, moment, d, sigma, design.ids, design.source)  # type: ignore[arg-type]
+
+    no_moments = not np.any(m)
+
+    def fit(d, sigma, force, moment):
+        # A design without moments passes its (host) zeros: a traced moment cannot be
+        # seen to be zero, and the model would then carry the moment's generalised
+        # force through every equilibrium (about 3x the cost per trial).
+        if no_moments:
+            moment = m
+        return _from_result(base(robot, _data(d, sigma, force, moment), **kw))
+
+    # The names are static: abstract evaluation gets them without compiling anything.
+    probe = jax.eval_shape(lambda d: base(robot, _data(d, design.sigma), **kw), clean)
+    names = tuple(probe.names)
+    return TrialFit(
+        names,
+        true_values(robot, design, names),
+        fit,
+        lambda: null_space_names(robot, design, names),
+        f,
+        m,
+    )
