@@ -44,6 +44,8 @@ from ._identification.two_step import (
 from ._io import (
     DataError as DataError,
     Dataset as Dataset,
+    configurations as configurations,
+    q2_groups as q2_groups,
     read_dataset as read_dataset,
     write_dataset as write_dataset,
 )
@@ -93,7 +95,6 @@ from ._model.observation import (
     observation_aggregated as observation_aggregated,
     observation_linear as observation_linear,
     observation_physical as observation_physical,
-    q2_groups as q2_groups,
 )
 from ._model.simulate import (
     DeflectionError as DeflectionError,

@@ -16,7 +16,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["map_in_chunks"]
+__all__ = ["chunk_width", "map_in_chunks"]
+
+
+def chunk_width(cpu: int, accelerator: int) -> int:
+    """Members per call for the default backend: `cpu` where a member costs the same in
+    any batch (the width only pads), `accelerator` where width is what it gains from."""
+    return cpu if jax.default_backend() == "cpu" else accelerator
 
 
 def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -> Any:

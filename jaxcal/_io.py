@@ -19,7 +19,7 @@ from typing import TextIO
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ._robot import Robot
 
@@ -30,6 +30,8 @@ __all__ = [
     "atomic_text_file",
     "input_cells",
     "DataError",
+    "configurations",
+    "q2_groups",
 ]
 
 Q_COLS = tuple(f"q{i}_deg" for i in range(1, 7))
@@ -125,6 +127,22 @@ class Dataset(eqx.Module):
             tuple(str(i) for i in ids),
             source,
         )
+
+
+def configurations(q: Float[ArrayLike, "n 6"]) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct configurations (rows of `q` equal to the bit, sorted) and each row's
+    index into them. Host-side: rows measured at one configuration share its unloaded
+    equilibrium and its held-out group."""
+    unique, index = np.unique(np.asarray(q), axis=0, return_inverse=True)
+    return unique, index.reshape(-1)
+
+
+def q2_groups(q2: Float[Array, " n"], decimals: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct q2 values (rad) of a data set and each row's group index. Values equal
+    to `decimals` decimals of a degree are the same group. Host-side (not traceable)."""
+    key = np.round(np.rad2deg(np.asarray(q2)), decimals)
+    values, index = np.unique(key, return_inverse=True)
+    return np.deg2rad(values), index
 
 
 def _parse(value: str) -> float | None:

@@ -196,10 +196,12 @@ def test_vertical_loads_exclude_k1_and_rank_deficiency_is_named(robot, designs):
     # Full model: k1 excluded, the rest of full rank.
     c = design_criteria(robot, q, _vertical(robot, 12), parameters="physical")
     assert "k1_urad_per_Nm" not in c.names and bool(c.full_rank)
+    assert bool(c.result == jaxcal.RESULTS.successful)
     forced = design_criteria(
         robot, q, _vertical(robot, 12), include_k1=True, model="linear", parameters="physical"
     )
     assert not bool(forced.full_rank)
+    assert bool(forced.result == jaxcal.RESULTS.rank_deficient)
     assert np.isinf(float(forced.trace))
     assert forced.unidentifiable() == ("k1_urad_per_Nm",)
     # One q2 value: Kc and s0 cannot be separated from k2 (eq. 21 needs 3 values of q2).

@@ -202,6 +202,13 @@ def test_unstable_robot_is_flagged(robot, rows, floppy):
     assert not ok.all() and ok.any()
     # Newton may converge to a saddle: that is reported as unstable, not as a result.
     assert np.any(np.asarray(sol0.converged) & ~np.asarray(sol0.stable))
+    # The same outcomes in the RESULTS vocabulary.
+    for s in (sol, sol0):
+        conv, stab = np.asarray(s.converged), np.asarray(s.stable)
+        r = s.result
+        np.testing.assert_array_equal(np.asarray(r == jaxcal.RESULTS.successful), conv & stab)
+        np.testing.assert_array_equal(np.asarray(r == jaxcal.RESULTS.unstable), conv & ~stab)
+        np.testing.assert_array_equal(np.asarray(r == jaxcal.RESULTS.equilibrium_failed), ~conv)
     # A non-finite deflection is never flagged ok.
     assert np.all(np.isfinite(dp[ok]))
     # The public entry points: model_deflections names the failed rows (1-based) ...

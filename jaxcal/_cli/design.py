@@ -286,7 +286,7 @@ def run_design(args: argparse.Namespace) -> int:
 def _bound_problem(robot, data, parameters, model, criterion="trace"):
     # The bound applies when the file's loads are the experiment's: the test load,
     # vertical ("vertical") or also across the arm ("mixed"), no moments.
-    from .._model.observation import q2_groups
+    from .._io import q2_groups
     from ..design._constraints import design_loads, horizontal_loads
     from ..design._plans import level_separation
     from ..design._problem import DesignProblem

@@ -19,10 +19,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import Dataset
+from .._io import Dataset, configurations, q2_groups
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
+from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
 from .methods import (
     linear_columns,
@@ -171,7 +172,7 @@ def _reasons(robot: Robot, data: Dataset, bad: list[str]) -> str:
             "every load is vertical, and a vertical force gives no torque about the "
             "(vertical) axis 1, so k1 does not affect the deflections"
         )
-    n_q2 = len(np.unique(np.round(np.rad2deg(np.asarray(data.q[:, 1])), 6)))
+    n_q2 = len(q2_groups(data.q[:, 1])[0])
     if robot.has_compensator and {"Kc_N_per_m", "s0_m"} & set(bad) and n_q2 < 3:
         why.append(
             f"the rows have {n_q2} distinct q2 value(s); k2, Kc and s0 act only through the "
@@ -191,6 +192,7 @@ def identify(
     max_steps: int = 64,
     screen_gross: bool = True,
     keep_outliers: bool = False,
+    throw: bool = False,
 ) -> IdentificationResult:
     """Identify the elastostatic parameters of `robot` from measured `data`.
 
@@ -209,8 +211,9 @@ def identify(
 
     Raises `ValueError` for float64 off, missing deflections, non-finite values, joint
     angles outside the limits, and parameters the data cannot determine (named, with
-    the `--fix` that would make the rest identifiable). Warns if the fit did not
-    converge. Outlier rows: `result.outliers(threshold)`.
+    the `--fix` that would make the rest identifiable). If the fit did not succeed
+    (`result.result` is not `RESULTS.successful`) it warns with the reason, or raises
+    `RuntimeError` with it when `throw=True`. Outlier rows: `result.outliers(threshold)`.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -231,7 +234,7 @@ def identify(
     keep = [i for i, n in enumerate(cols) if n not in fixed]
     bad, suggest = identifiability(X[:, keep], tuple(cols[i] for i in keep))
     if method == "two-step" and not bad:
-        n_q2 = len(np.unique(np.round(np.rad2deg(np.asarray(data.q[:, 1])), 6)))
+        n_q2 = len(q2_groups(data.q[:, 1])[0])
         if n_q2 < 3:
             bad, suggest = ["Kc_N_per_m", "s0_m"], []
     if bad:
@@ -269,11 +272,11 @@ def identify(
     if screen_gross:
         res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
     if not bool(res.converged):
-        warnings.warn(
-            f"the {method} fit did not converge (or its design is numerically singular); "
-            "the estimates are not reliable",
-            stacklevel=2,
-        )
+        why = messages(res.result)[0] or "it did not converge"
+        text = f"the {method} fit failed: {why}; the estimates are not reliable"
+        if throw:
+            raise RuntimeError(text)
+        warnings.warn(text, stacklevel=2)
     for msg in plausibility(robot, res):
         warnings.warn(msg, stacklevel=2)
     return res
@@ -363,11 +366,8 @@ def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps):
 
 
 def _nonlinear(robot, data, free, loss, delta, steps):
-    q = np.asarray(data.q)
-    u, inv = np.unique(q, axis=0, return_inverse=True)
-    return nonlinear_jit(
-        robot, data, jnp.asarray(u), jnp.asarray(inv.reshape(-1)), free, loss, delta, steps
-    )
+    u, inv = configurations(data.q)
+    return nonlinear_jit(robot, data, jnp.asarray(u), jnp.asarray(inv), free, loss, delta, steps)
 
 
 def _linear(robot, data, free):

@@ -26,13 +26,16 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._linalg.dense import SmallCholesky, SmallQR, eigvalsh
+from .._solution import RESULTS, result_of
 
 __all__ = [
     "LsqFit",
+    "levenberg_marquardt",
     "nonlinear_fit",
     "huber_transform",
     "huber_weights",
     "covariance_from_jacobian",
+    "masked_covariance",
     "LinearFactor",
     "linear_factor",
     "linear_solve_factored",
@@ -45,7 +48,7 @@ RCOND = 1e-12
 _JAC = "fwd"
 
 
-class _LevenbergMarquardt(optx.LevenbergMarquardt):
+class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
     """optimistix's Levenberg–Marquardt that also stops once a *rejected* step is
     followed by a proposal smaller than the tolerance.
 
@@ -66,6 +69,14 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
         return done | stalled, result
 
 
+def levenberg_marquardt(rtol: float, atol: float) -> StallingLevenbergMarquardt:
+    """The one Levenberg–Marquardt solver of jaxcal (identify, Monte-Carlo, discover):
+    the stall check above, and Householder QR in plain jnp (`SmallQR`) for its linear
+    steps, because fits run vmapped and batched LAPACK kernels can deadlock XLA's CPU
+    pool (see `_linalg/dense.py`)."""
+    return StallingLevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())  # pyright: ignore[reportCallIssue]
+
+
 class LsqFit(eqx.Module):
     """Result of a least-squares fit, in the caller's parameter units.
 
@@ -76,6 +87,8 @@ class LsqFit(eqx.Module):
     - `chi2`: `Σ (residual/σ)²` (plain, not the robust loss).
     - `converged`: solver succeeded, model evaluations finite/converged, design well posed.
     - `steps`: solver steps taken.
+    - `result`: `RESULTS.successful` exactly when `converged`, else the first check that
+      failed: `equilibrium_failed`, `nonfinite`, `not_converged`, `rank_deficient`.
     """
 
     estimate: Float[Array, " P"]
@@ -84,6 +97,7 @@ class LsqFit(eqx.Module):
     chi2: Float[Array, ""]
     converged: Bool[Array, ""]
     steps: Int[Array, ""]
+    result: RESULTS
 
 
 def huber_transform(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
@@ -130,6 +144,16 @@ def covariance_from_jacobian(
     cov = X / (d[:, None] * d[None, :])
     cov = 0.5 * (cov + cov.T)
     return jnp.where(well, cov, jnp.nan), well
+
+
+def masked_covariance(
+    J: Float[Array, "m q"], mask: Float[Array, " q"]
+) -> tuple[Float[Array, "q q"], Bool[Array, ""]]:
+    """`covariance_from_jacobian` over the columns of `J` where `mask` is 1 (the others
+    get a unit row of their own, so their block is the identity and the fitted block is
+    exact): one shape serves fits that free different parameters."""
+    m = mask.astype(J.dtype)
+    return covariance_from_jacobian(jnp.concatenate([J * m[None, :], jnp.diag(1.0 - m)]))
 
 
 def _split(out):
@@ -252,9 +276,7 @@ def nonlinear_fit(
         return residual(y)
 
     y0 = jnp.zeros(idx.shape[0], p0.dtype)
-    # Householder QR in plain jnp (`SmallQR`), not lineax's LAPACK QR: fits run vmapped
-    # over Monte-Carlo trials, where batched LAPACK kernels can deadlock (see `_dense`).
-    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())  # pyright: ignore[reportCallIssue]
+    solver = levenberg_marquardt(rtol, atol)
     # optimistix traces the residual twice (shape inference under `eval_shape`, which
     # runs in an empty abstract-mesh context, and the solve itself). Under one context
     # the model's jitted inner pieces (`batch_roots`) are traced once and reused.
@@ -273,7 +295,14 @@ def nonlinear_fit(
     cov_free = cov_y * (s_free[:, None] * s_free[None, :])
     cov = jnp.zeros((P, P), p0.dtype).at[idx[:, None], idx[None, :]].set(cov_free)
     finite = jnp.all(jnp.isfinite(res)) & jnp.all(jnp.isfinite(p))
-    converged = (sol.result == optx.RESULTS.successful) & ok & finite & well
+    solved = sol.result == optx.RESULTS.successful
+    converged = solved & ok & finite & well
+    result = result_of(
+        (ok, RESULTS.equilibrium_failed),
+        (finite, RESULTS.nonfinite),
+        (solved, RESULTS.not_converged),
+        (well, RESULTS.rank_deficient),
+    )
     return LsqFit(
         estimate=p,
         covariance=cov,
@@ -281,6 +310,7 @@ def nonlinear_fit(
         chi2=jnp.sum(r**2),
         converged=converged,
         steps=sol.stats["num_steps"],
+        result=result,
     )
 
 

@@ -24,12 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._io import Dataset
+from .._io import Dataset, configurations
 from .._model.compensator import compensator_stiffness
 from .._model.equilibrium import measured_deflections, with_unloaded
 from .._model.observation import observation_linear
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
+from .._solution import RESULTS, result_of
 from .lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
 from .result import IdentificationResult, free_mask, make_result, resolve_name
 
@@ -111,8 +112,12 @@ def solve_linear(system: LinearSystem, deflection: Float[Array, "n 3"]) -> Ident
     est = system.p_ref.at[idx].set(k)
     cov = jnp.zeros((P, P), k.dtype).at[np.ix_(idx, idx)].set(f.covariance)
     res = r.reshape(-1, 3) * system.sigma[:, None]
-    ok = f.well_posed & jnp.all(jnp.isfinite(k))
-    return make_result("linear", system.names, system.mask, est, cov, res, system.sigma, ok)
+    finite = jnp.all(jnp.isfinite(k))
+    ok = f.well_posed & finite
+    result = result_of((f.well_posed, RESULTS.rank_deficient), (finite, RESULTS.nonfinite))
+    return make_result(
+        "linear", system.names, system.mask, est, cov, res, system.sigma, ok, result=result
+    )
 
 
 #: `solve_linear` compiled once per shape (host-side callers; inside a trace it inlines).
@@ -137,8 +142,8 @@ def _unique_rows(q) -> tuple[Array, Array]:
         qn = np.asarray(q)
     except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
         return q, jnp.arange(q.shape[0])
-    u, inv = np.unique(qn, axis=0, return_inverse=True)
-    return jnp.asarray(u, q.dtype), jnp.asarray(inv.reshape(-1))
+    u, inv = configurations(qn)
+    return jnp.asarray(u, q.dtype), jnp.asarray(inv)
 
 
 def _has_moments(data: Dataset) -> bool:
@@ -234,4 +239,5 @@ def nonlinear_with_groups(robot, data, q_u, inv, free, loss, huber_delta, max_st
         data.sigma,
         fit.converged,
         fit.steps,
+        result=fit.result,
     )

@@ -17,6 +17,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._format import format_table
 from .._parameters import parameter_units
 from .._robot import Robot
+from .._solution import RESULTS, messages, result_of
 
 __all__ = ["IdentificationResult", "Z95", "free_mask", "make_result", "resolve_name"]
 
@@ -55,6 +56,7 @@ class IdentificationResult(eqx.Module):
     converged: Bool[Array, ""]
     steps: Int[Array, ""]
     fixed_values: Float[Array, " k"]
+    result: RESULTS
     method: str = eqx.field(static=True)
     names: tuple[str, ...] = eqx.field(static=True)
     dof: int = eqx.field(static=True)
@@ -147,6 +149,7 @@ class IdentificationResult(eqx.Module):
             }
         if not bool(self.converged):
             d["converged"] = False
+            d["result"] = messages(self.result)[0]
         return d
 
     def table(self, truth: dict[str, float] | None = None) -> str:
@@ -221,8 +224,12 @@ def make_result(
     sigma: Float[Array, " n"],
     converged: Bool[Array, ""],
     steps: Int[Array, ""] | int = 0,
+    result: RESULTS | None = None,
 ) -> IdentificationResult:
-    """Assemble an `IdentificationResult` from full-length vectors (traceable)."""
+    """Assemble an `IdentificationResult` from full-length vectors (traceable). `result`
+    says why a fit did not converge (default: `not_converged` when it did not)."""
+    if result is None:
+        result = result_of((converged, RESULTS.not_converged))
     idx = np.flatnonzero(mask)
     fidx = np.flatnonzero(~np.asarray(mask, bool))
     est = estimate_all[idx]
@@ -243,6 +250,7 @@ def make_result(
         converged=jnp.asarray(converged),
         steps=jnp.asarray(steps),
         fixed_values=estimate_all[fidx],
+        result=result,
         method=method,
         names=tuple(names_all[i] for i in idx),
         dof=dof,

@@ -27,11 +27,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._io import Dataset
+from .._io import Dataset, q2_groups
 from .._linalg.dense import cho_solve, cholesky, eigvalsh
-from .._model.observation import observation_linear, q2_groups
+from .._model.compensator import eta_terms
+from .._model.observation import observation_linear
 from .._parameters import get_parameters
 from .._robot import URAD, Robot
+from .._solution import RESULTS, result_of
 from .lsq import RCOND, LinearFactor, linear_factor, linear_solve_factored
 from .result import IdentificationResult, free_mask, make_result
 
@@ -41,11 +43,9 @@ __all__ = ["TwoStepSystem", "two_step_system", "solve_two_step", "fit_two_step",
 def step2_row(lc, l2, phi, *, exact: bool = True) -> Float[Array, "... 3"]:
     """Row `C_i` of eq. (22) (N·m/rad per [N·m/rad, N/m, N]); `exact=False` gives the
     printed `sin q2` (wrong, kept for comparison)."""
-    s = jnp.sqrt(lc**2 + l2**2 - 2.0 * lc * l2 * jnp.cos(phi))
+    a, b = eta_terms(lc, l2, phi, exact=exact)
     L = lc * l2
-    sn = jnp.sin(phi) ** 2 if exact else jnp.sin(phi)
-    ones = jnp.ones_like(phi)
-    return jnp.stack([ones, L * jnp.cos(phi), L * (L * sn / s**3 - jnp.cos(phi) / s)], axis=-1)
+    return jnp.stack([jnp.ones_like(a), L * a, L * b], axis=-1)
 
 
 class TwoStepSystem(eqx.Module):
@@ -154,18 +154,23 @@ def solve_two_step(system: TwoStepSystem, deflection: Float[Array, "n 3"]) -> Id
     # Residuals of the linear model at the final parameters (compensator aggregated, eq. 10).
     k = params[:6]
     Kc, s0 = params[6], params[7]
-    L = system.lc * system.l2
-    phi = system.q2
-    s = jnp.sqrt(system.lc**2 + system.l2**2 - 2.0 * L * jnp.cos(phi))
-    eta = jnp.cos(phi) + s0 * L * jnp.sin(phi) ** 2 / s**3 - s0 / s * jnp.cos(phi)
-    c = Kc * L * eta * URAD  # per µrad/(N·m)
+    a, b = eta_terms(system.lc, system.l2, system.q2)
+    c = Kc * system.lc * system.l2 * (a + s0 * b) * URAD  # per µrad/(N·m)
     kap2 = 1.0 / (1.0 / k[1] + c)[system.group]  # (n,)
     kap = jnp.broadcast_to(k, (kap2.shape[0], 6)).at[:, 1].set(kap2)
     model = jnp.einsum("nij,nj->ni", system.A, kap)
     res = deflection - model
-    ok = f.well_posed & well2 & jnp.all(jnp.isfinite(params)) & jnp.all(jnp.isfinite(cov))
+    finite = jnp.all(jnp.isfinite(params)) & jnp.all(jnp.isfinite(cov))
+    ok = f.well_posed & well2 & finite
+    result = result_of(
+        (f.well_posed, RESULTS.rank_deficient),
+        (well2, RESULTS.rank_deficient),
+        (finite, RESULTS.nonfinite),
+    )
     mask = (system.step1_mask[0],) + (True,) + system.step1_mask[-4:] + (True, True)
-    return make_result("two-step", system.names, mask, params, cov, res, system.sigma, ok)
+    return make_result(
+        "two-step", system.names, mask, params, cov, res, system.sigma, ok, result=result
+    )
 
 
 def fit_two_step(

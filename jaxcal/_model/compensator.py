@@ -31,12 +31,17 @@ __all__ = [
     "compensator_torque",
     "compensator_stiffness",
     "eta_exact",
+    "eta_terms",
     "eta_printed_eq11",
 ]
 
 
 def _spring_length(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:
-    lc, l2 = robot.lc, robot.l2c
+    return _length(robot.lc, robot.l2c, phi2)
+
+
+def _length(lc, l2, phi2):
+    # Eq. (7): the spring spans the triangle of the two lever arms.
     return jnp.sqrt(lc**2 + l2**2 - 2.0 * lc * l2 * jnp.cos(phi2))
 
 
@@ -90,11 +95,20 @@ def compensator_stiffness(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Arr
     return jax.grad(lambda p: _torque(robot, p))(phi2)
 
 
+def eta_terms(lc, l2, phi2, *, exact: bool = True) -> tuple[Array, Array]:
+    """The one η law: `η = a + s0·b` of eq. (11) (`lc`, `l2` m, `phi2` rad), returned as
+    `(a, b)` = `(cos φ2, lc·l2·sin² φ2 / s³ − cos φ2 / s)` with `s(φ2)` of eq. (7). η is
+    linear in `s0`, which is what the second step of the two-step method (eq. 22)
+    solves for. `exact=False` gives the printed `sin φ2` (wrong, kept for comparison)."""
+    s = _length(lc, l2, phi2)
+    sn = jnp.sin(phi2) ** 2 if exact else jnp.sin(phi2)
+    return jnp.cos(phi2), lc * l2 * sn / s**3 - jnp.cos(phi2) / s
+
+
 def eta_exact(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """The exact dimensionless coefficient η of eq. (11), with `sin² φ2`."""
-    s = _spring_length(robot, phi2)
-    s0, lc, l2 = robot.s0, robot.lc, robot.l2c
-    return jnp.cos(phi2) + s0 * lc * l2 / s**3 * jnp.sin(phi2) ** 2 - s0 / s * jnp.cos(phi2)
+    a, b = eta_terms(robot.lc, robot.l2c, phi2)
+    return a + robot.s0 * b
 
 
 def eta_printed_eq11(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:
@@ -102,6 +116,5 @@ def eta_printed_eq11(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, "
 
     Kept only for comparison; never used by the model.
     """
-    s = _spring_length(robot, phi2)
-    s0, lc, l2 = robot.s0, robot.lc, robot.l2c
-    return jnp.cos(phi2) + s0 * lc * l2 / s**3 * jnp.sin(phi2) - s0 / s * jnp.cos(phi2)
+    a, b = eta_terms(robot.lc, robot.l2c, phi2, exact=False)
+    return a + robot.s0 * b

@@ -23,6 +23,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._linalg.dense import SmallLU, is_positive_definite, lu_factor, lu_solve
 from .._robot import G, Robot
+from .._solution import RESULTS, result_of
 from .compensator import spring_energy as _compensator_potential
 from .effects import collect_effects, observe_effects
 from .kinematics import forward, mass_positions, vee_rotation_derivative
@@ -98,12 +99,19 @@ class Equilibrium(eqx.Module):
     - `converged`: Newton met its tolerance within its step budget.
     - `stable`: the Hessian of the potential is positive definite there (a minimum).
     - `steps`: Newton steps taken.
+    - `result` (property): `RESULTS.successful`, `equilibrium_failed` or `unstable`.
     """
 
     x: Float[Array, " ndof"]
     converged: Bool[Array, ""]
     stable: Bool[Array, ""]
     steps: Int[Array, ""]
+
+    @property
+    def result(self) -> RESULTS:
+        return result_of(
+            (self.converged, RESULTS.equilibrium_failed), (self.stable, RESULTS.unstable)
+        )
 
     @property
     def theta(self) -> Float[Array, 6]:
@@ -266,8 +274,19 @@ def batch_roots(
     return eq.x, eq.converged
 
 
-def implicit_step(robot: Robot, q, force, moment, x, converged, *, symmetric: bool = True):
-    """The root `x` of eq. (17) as a differentiable function: `x − H⁻¹ g(x)`.
+def implicit_step(
+    robot: Robot,
+    q,
+    force,
+    moment,
+    x,
+    converged,
+    *,
+    symmetric: bool = True,
+    frozen_hessian: bool = False,
+):
+    """The root `x` of eq. (17) as a differentiable function: `x − H⁻¹ g(x)`; the one
+    implicit-function derivative of jaxcal (identify, discover, design, compensate).
 
     At a root (from `batch_roots` or `solve_state` on stop-gradient inputs) the value is `x`
     and the first derivative with respect to the robot's parameters, `q`, the force and
@@ -275,6 +294,10 @@ def implicit_step(robot: Robot, q, force, moment, x, converged, *, symmetric: bo
     its linear solve never raises, so a failed equilibrium gives `ok = False`, not an
     exception (essential under `vmap`). `symmetric` symmetrises `H` (exact for a
     potential force; a tool moment makes `H` non-symmetric: pass `False`).
+    `frozen_hessian` holds `H` constant: the first derivative is unchanged (`g = 0` at
+    the root), and a caller that differentiates the result's derivative again (the
+    design optimiser's q-gradient of a sensitivity) does not trace third derivatives of
+    the potential.
     """
     r0 = stop_gradients(robot)
     x = jnp.where(jnp.isfinite(x), x, 0.0)
@@ -283,6 +306,8 @@ def implicit_step(robot: Robot, q, force, moment, x, converged, *, symmetric: bo
     g = equilibrium_residual(x, (robot, q, force, moment, ones))
     if symmetric:
         H = 0.5 * (H + H.T)
+    if frozen_hessian:
+        H = jax.lax.stop_gradient(H)
     # lineax's JVP rule always raises on a non-finite solve, so a failed equilibrium
     # gets a harmless identity Hessian (the row is flagged and replaced below).
     good = converged & jnp.all(jnp.isfinite(H)) & jnp.all(jnp.isfinite(x))
@@ -316,9 +341,8 @@ def measured_deflections(
     configurations (`inverse` (n,) maps a row to its one), `force_all` / `moment_all` the
     rows' loads followed by zeros. Every equilibrium goes through *one* vmapped Newton
     solve (`batch_roots`): one copy of the equilibrium program in a compiled fit instead
-    of two. (Warm-starting it at the roots of a fit's starting point was measured: the
-    batch's slowest solve still takes 3 Newton steps instead of 4, and the extra solve
-    ate the gain.)
+    of two. It starts from θ = 0, not from a fit's previous roots: the slowest solve of
+    a batch saves one Newton step that way, and the extra solve costs more.
 
     Returns `(dp (n, 3) m, ok (n,))`; a row whose equilibria failed is
     `FAILED_DEFLECTION` in `dp` and `False` in `ok`. `with_unloaded` builds the inputs.

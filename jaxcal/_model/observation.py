@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._io import Dataset
+from .._io import Dataset, q2_groups
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
 from .equilibrium import solve_deflection
@@ -30,7 +30,6 @@ __all__ = [
     "observation_linear",
     "observation_aggregated",
     "observation_physical",
-    "q2_groups",
     "linear_model_deflection",
 ]
 
@@ -61,14 +60,6 @@ def observation_linear(robot: Robot, data: Dataset) -> Float[Array, "n 3 6"]:
         return jax.jacfwd(lambda k: linear_model_deflection(robot, q, _wrench(f, m), k))(k0)
 
     return jax.vmap(one)(data.q, data.force, data.moment)
-
-
-def q2_groups(q2: Float[Array, " n"], decimals: int = 6) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct q2 values (rad) of a data set and each row's group index. Values equal
-    to `decimals` decimals of a degree are the same group. Host-side (not traceable)."""
-    key = np.round(np.rad2deg(np.asarray(q2)), decimals)
-    values, index = np.unique(key, return_inverse=True)
-    return np.deg2rad(values), index
 
 
 def observation_aggregated(

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._batching import map_in_chunks
+from .._batching import chunk_width, map_in_chunks
 from .._identification.calibration import Calibration
 from .._io import Dataset, atomic_text_file, input_cells, read_dataset
 from .._robot import Robot
@@ -31,7 +31,7 @@ def chunk_rows() -> int:
     """Rows per call of the compiled path program (paths are padded to a multiple, so
     one compile serves every path length): on a CPU a row costs the same in any batch,
     and 64 keeps the padding of short paths cheap; an accelerator gains from width."""
-    return 64 if jax.default_backend() == "cpu" else 1024
+    return chunk_width(cpu=64, accelerator=1024)
 
 
 #: Columns a commands file adds to the path's own.

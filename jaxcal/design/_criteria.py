@@ -39,8 +39,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._io import q2_groups
 from .._linalg.dense import cholesky, solve_lower
 from .._robot import Robot
+from .._solution import RESULTS, result_of
 from ._observation import (
     MODELS,
     PARAMETER_SETS,
@@ -93,6 +95,12 @@ class DesignCriteria(eqx.Module):
     full_rank: Bool[Array, ""]
     relative: bool = eqx.field(static=True)
     weights: tuple[float, float] = eqx.field(static=True)
+
+    @property
+    def result(self) -> RESULTS:
+        """`RESULTS.successful`, or `rank_deficient` when the design cannot determine
+        every parameter (`full_rank` false)."""
+        return result_of((self.full_rank, RESULTS.rank_deficient))
 
     def value(self, criterion: str) -> Float[Array, ""]:
         """The criterion `"trace"`, `"det"` or `"weighted"`."""
@@ -281,8 +289,6 @@ def design_criteria(
         sigma = robot.experiment.noise_std
     sig = jnp.broadcast_to(jnp.asarray(sigma, q.dtype), (m,))
     if parameters == "aggregated":
-        from .._model.observation import q2_groups
-
         vals, idx = q2_groups(q[:, 1])
         names = design_parameter_names(
             robot, "aggregated", include_k1=include_k1, q2_values_deg=np.rad2deg(vals)

@@ -18,7 +18,7 @@ for the two parameter sets and the two observation models (criteria: `design/_cr
 - `"full"` (the default of `design_criteria`, `optimise_design` and the CLI): the
   Jacobian of the full equilibrium deflection (loaded minus gravity-only equilibrium)
   in the parameters, the same matrix as `jaxcal.observation_physical`, by the implicit
-  function theorem written out (see `_equilibrium_sensitivity`) so that its q-gradient
+  function theorem (`implicit_step`, see `_equilibrium_sensitivity`) so that its q-gradient
   compiles and runs fast enough to optimise on.
 - `"linear"`: eq. (5) with joint 2's compliance replaced by the aggregated
   `1/(1/k2 + K_comp(q2; Kc, s0))` (eq. 10), by autodiff; ~10x cheaper per gradient. It
@@ -37,7 +37,13 @@ from jaxtyping import Array, Float, Int
 
 from .._linalg.dense import cho_solve, cholesky
 from .._model.compensator import compensator_stiffness
-from .._model.equilibrium import solve_deflection, solve_state, tool_pose, total_potential
+from .._model.equilibrium import (
+    implicit_step,
+    solve_deflection,
+    solve_state,
+    tool_pose,
+    total_potential,
+)
 from .._model.kinematics import Rx, forward, jacobian_theta
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
@@ -137,22 +143,21 @@ def _equilibrium_sensitivity(robot: Robot, p0, q, force):
     # Why not jacfwd through `solve_deflection`: the design optimiser differentiates this
     # in q, a second derivative through the root find; nesting autodiff through
     # optimistix's implicit adjoint compiles to a much larger program. Here the root is
-    # found without derivatives (stop_gradient) and one Newton step from it,
-    # x1 = x* − H⁻¹ g(x*, q) with H frozen, has the exact value and exact first derivative
-    # in q (g = 0 at x*), which is all the q-gradient of the criterion needs.
+    # found without derivatives (stop_gradient) and `implicit_step` with its Hessian
+    # frozen gives x1 with the exact value and first derivative in q, which is all the
+    # q-gradient of the criterion needs.
     def U(p, x, a):
         return total_potential(set_parameters(robot, p), a, x, force)
 
     eq = solve_state(robot, jax.lax.stop_gradient(q), force, None, check_stability=False)
     xs = jax.lax.stop_gradient(eq.x)
-    L0 = cholesky(jax.lax.stop_gradient(jax.hessian(U, 1)(p0, xs, q)))
-    x1 = xs - cho_solve(L0, jax.grad(U, 1)(p0, xs, q))
-    H = jax.hessian(U, 1)(p0, x1, q)
+    x1, ok = implicit_step(robot, q, force, None, xs, eq.converged, frozen_hessian=True)
+    L = cholesky(jax.hessian(U, 1)(p0, x1, q))
     Gp = jax.jacfwd(jax.grad(U, 1), 0)(p0, x1, q)  # (ndof, p)
     J = jax.jacfwd(lambda x: tool_pose(robot, q, x)[0])(x1)
     # A Cholesky pivot that is not positive: not a stable equilibrium (a saddle).
-    ok = eq.converged & jnp.all(jnp.isfinite(L0)) & jnp.all(jnp.diagonal(L0) > 0)
-    return -J @ cho_solve(cholesky(H), Gp), ok
+    ok = ok & jnp.all(jnp.isfinite(L)) & jnp.all(jnp.diagonal(L) > 0)
+    return -J @ cho_solve(L, Gp), ok
 
 
 def _full_columns(robot: Robot, p0, q, force, moment) -> Float[Array, "3 p"]:

@@ -260,8 +260,8 @@ def optimise_design(
     - `pool`: if positive, first draw `pool` random feasible designs
       (`random_designs(robot, pool, m, seed)`), evaluate the criterion on all of them,
       start from the best `starts` of them, and record the best value as
-      `Design.random_best` (the reference of the issue's "at most half of the best of
-      200 random feasible designs"). Otherwise the starts are `starts` random designs.
+      `Design.random_best` (the usual reference: the best of 200 random feasible
+      designs). Otherwise the starts are `starts` random designs.
     - `max_steps`, `rtol`: BFGS budget and tolerance per penalty round.
     - `progress`: print the best feasible value after each round to stderr.
     - `model`: the observation model the criterion is optimised on (default `"full"`;

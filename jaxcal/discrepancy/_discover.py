@@ -11,14 +11,13 @@ missing effect, add it, show the gap shrink.
    for effects with a `screen_size`, e.g. backlash); a dead band or nonlinearity of
    joint 2, whose signature depends on the compensator's preload, is also scanned over
    `Kc·s0`. The best `refine` are fitted with the full nonlinear model (nominal
-   parameters re-identified together with the effect's) by optimistix
-   Levenberg–Marquardt, batched over candidates and data sets (`jaxcal.discrepancy._supermodel`).
+   parameters re-identified together with the effect's) by Levenberg–Marquardt,
+   batched over candidates and data sets (`_supermodel.py`).
    Each fit starts at the nominal optimum with the effect absent (at its screening size
    if it has one), or at the best point of the preload scan where that beats the
    score; not at the linearised step: the compensator parameters are weakly determined,
    and a linear step along them can overshoot into a region from which the fit does not
-   return (measured with 64 LM steps on hidden joint-2 nonlinearity: named in 4 of 10
-   seeds from the linear step, 10 of 10 from the optimum). A fit has a budget of
+   return (figures in `benchmarks/README.md`, "Design evidence"). A fit has a budget of
    `max_steps` LM steps (fits along the flat (Kc, Kc·s0) valley of a joint-2 dead band
    need 70–130); one that has not met the tolerances within it counts with its χ²,
    which bounds the candidate's minimum from above (conservative for ΔBIC).
@@ -30,7 +29,7 @@ compliances absorb is no discrepancy — the calibrated nominal model already pr
 3. **Selection**: BIC with the stated σ, `BIC = χ² + p·ln N` (N = 3·rows), and the
    likelihood-ratio test `Δχ² ~ χ²(Δp)`; the best physical candidate is chosen only if
    `ΔBIC ≥ 10` *and* its leave-one-configuration-out error is lower than the nominal
-   model's. Held-out residuals (`jaxcal.discrepancy._heldout`) use the PRESS formula at the
+   model's. Held-out residuals (`_heldout.py`) use the PRESS formula at the
    optimum, `r₋g = (I − H_gg)⁻¹ r_g` for the rows `g` of one configuration (H the hat
    matrix of the σ-weighted Jacobian), exact for a model linear in its parameters; a
    configuration with leverage above 0.5 (a dead band that shows in one or two
@@ -178,14 +177,19 @@ def discover_batch(
     held_nom = heldout_residuals(sm, nom, list(range(S)), deflections, sigma, max_steps)
     held = heldout_residuals(sm, fits, best_fits, targets_a, sigmas_a, max_steps)
 
-    reports = [
-        _report(sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held)
-        for s in range(S)
-    ]
-    if separate:
-        for rep in reports:
-            if rep.ambiguous_with:
-                separating_configurations(sm, data, rep, deflections)
+    reports = []
+    for s in range(S):
+        rep = _report(
+            sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held
+        )
+        if separate and rep.ambiguous_with:
+            params = {
+                r.label: fits.params[refined[(s, cands.index(r.candidate))]]
+                for r in rep.candidates
+                if r.refined
+            }
+            rep.separating = separating_configurations(sm, data, rep, params)
+        reports.append(rep)
     return reports
 
 
@@ -320,14 +324,8 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
         residuals_after=res_best,
         nominal_params=nominal if not chosen else named(sm.names, params_b, cov_b, slice(0, p0)),
         nominal_converged=bool(nom.converged[s]),
+        sigma_mm=float(np.mean(sigma) * 1e3),
     )
-    rep._sigma_mm = float(np.mean(sigma) * 1e3)
-    rep._best_params = params_b  # type: ignore[attr-defined]
-    rep._heldout_best_mm = held_best  # type: ignore[attr-defined]
-    rep._all_params = {  # type: ignore[attr-defined]
-        r.label: (fits.params[refined[(s, cands.index(r.candidate))]] if r.refined else None)
-        for r in results
-    }
     return rep
 
 

@@ -5,14 +5,12 @@ the fit to every other configuration are exactly `r₋g = (I − H_gg)⁻¹ r_g`
 the hat matrix of the σ-weighted Jacobian, `r` the σ-weighted residuals). The models
 here are nonlinear. The one-step formula is accurate where a configuration's leverage
 (the largest eigenvalue of `H_gg`) is small, and unreliable where it approaches 1, since
-it divides by `1 − leverage`. A dead band that shows in two configurations gives them
-leverage 0.6–1.0. Measured on a hidden joint-2 dead band (10 seeds): held-out RMS
-0.019–0.11 mm by the formula, 0.019–0.025 mm by refitting without each configuration.
-For the nominal model (leverage ≤ 0.39) both agree to 1e-4 mm. So a configuration with
-leverage above `LEVERAGE_MAX` is refitted without it (warm-started at the optimum, all
-such refits in one batch); the others use the formula (with `LEVERAGE_MAX` = 0.5 the
-result matched full refits to 5e-4 mm in those 10 seeds, at 2–3 refits per fit instead
-of 16).
+it divides by `1 − leverage`; a dead band that shows in two configurations gives them
+leverage 0.6–1.0, where the formula overstates the held-out error several-fold. So a
+configuration with leverage above `LEVERAGE_MAX` is refitted without it (warm-started
+at the optimum, all such refits in one batch); the others use the formula. The
+threshold keeps the result at full-refit accuracy for a few refits per fit instead of
+one per configuration (figures in `benchmarks/README.md`, "Design evidence").
 """
 
 from __future__ import annotations

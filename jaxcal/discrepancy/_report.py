@@ -101,6 +101,8 @@ class DiscoveryReport:
     #: Whether the nominal fit met its tolerances; if not its χ² is too high and ΔBIC
     #: may be overstated (the summary says so).
     nominal_converged: bool = True
+    #: The data's mean tracker σ (mm): the band of `plot` and the unit of `separating`.
+    sigma_mm: float = 0.02
 
     def to_json(self) -> dict:
         """The JSON object of `jaxcal discover --json`."""
@@ -182,7 +184,7 @@ class DiscoveryReport:
             n = res.shape[0]
             for k, (c, lab) in enumerate(zip("rgb", "xyz", strict=True)):
                 ax.plot(np.arange(n) + (k - 1) * 0.2, res[:, k], "o", ms=3, color=c, label=lab)
-            s = 2 * self._sigma_mm
+            s = 2 * self.sigma_mm
             ax.axhspan(-s, s, color="0.9", zorder=0)
             ax.axhline(0, color="0.5", lw=0.5)
             ax.set_ylabel("residual (mm)")
@@ -191,8 +193,6 @@ class DiscoveryReport:
         axes[1].set_xlabel("row")
         fig.tight_layout()
         return fig
-
-    _sigma_mm: float = 0.02
 
 
 # -- statistics ----------------------------------------------------------------------------
@@ -231,15 +231,14 @@ def rms_mm(res_m: np.ndarray) -> float:
 
 
 def separating_configurations(
-    sm: SuperModel, data: Dataset, rep: DiscoveryReport, deflections
-) -> None:
+    sm: SuperModel, data: Dataset, rep: DiscoveryReport, params: dict[str, np.ndarray]
+) -> list[dict]:
     """Measurements that would tell the best candidate from its runner-up: each model's
     prediction for the data's configurations under alternative loads (horizontal ±x,
-    ±y and vertical at the data's largest force, vertical at half of it); the largest
-    differences in units of σ."""
-    other = rep.ambiguous_with[0]
-    pa = rep._all_params[rep.best]  # type: ignore[attr-defined]
-    pb = rep._all_params[other]  # type: ignore[attr-defined]
+    ±y and vertical at the data's largest force, vertical at half of it); the five
+    largest differences in units of σ. `params` maps candidate labels to their fitted
+    SuperModel parameter vectors."""
+    pa, pb = params[rep.best], params[rep.ambiguous_with[0]]
     fmax = float(np.max(np.linalg.norm(np.asarray(data.force), axis=1)))
     loads = {
         "+x": (fmax, 0, 0),
@@ -249,35 +248,29 @@ def separating_configurations(
         "-z": (0, 0, -fmax),
         "-z/2": (0, 0, -fmax / 2),
     }
-    sigma_mm = rep._sigma_mm
+    sigma_mm = rep.sigma_mm
     found = []
-    design, groups = sm.design, sm.groups
-    try:
-        for name, f in loads.items():
-            alt = Dataset(
-                data.q,
-                jnp.broadcast_to(jnp.asarray(f, float), data.force.shape),
-                jnp.zeros_like(data.moment),
-                None,
-                data.sigma,
+    for name, f in loads.items():
+        alt = Dataset(
+            data.q,
+            jnp.broadcast_to(jnp.asarray(f, float), data.force.shape),
+            jnp.zeros_like(data.moment),
+            None,
+            data.sigma,
+        )
+        other = sm.with_design(alt)
+        dp, ok = other.predict(np.stack([pa, pb]))
+        diff = np.linalg.norm(dp[0] - dp[1], axis=1) * 1e3 / sigma_mm
+        for g in np.unique(other.groups):
+            row = int(np.flatnonzero(other.groups == g)[0])
+            found.append(
+                {
+                    "configuration": int(g),
+                    "row": row + 1,
+                    "q_deg": np.rad2deg(np.asarray(data.q[row])).round(2).tolist(),
+                    "load": f"{name} {fmax:.0f} N" if "/" not in name else f"-z {fmax / 2:.0f} N",
+                    "difference_sigma": float(diff[row]),
+                }
             )
-            sm.set_design(alt)
-            dp, ok = sm.predict(np.stack([pa, pb]))
-            diff = np.linalg.norm(dp[0] - dp[1], axis=1) * 1e3 / sigma_mm
-            for g in np.unique(sm.groups):
-                row = int(np.flatnonzero(sm.groups == g)[0])
-                found.append(
-                    {
-                        "configuration": int(g),
-                        "row": row + 1,
-                        "q_deg": np.rad2deg(np.asarray(data.q[row])).round(2).tolist(),
-                        "load": f"{name} {fmax:.0f} N"
-                        if "/" not in name
-                        else f"-z {fmax / 2:.0f} N",
-                        "difference_sigma": float(diff[row]),
-                    }
-                )
-    finally:
-        sm.design, sm.groups = design, groups
     found.sort(key=lambda d: -d["difference_sigma"])
-    rep.separating = found[:5]
+    return found[:5]

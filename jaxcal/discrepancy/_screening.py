@@ -11,9 +11,9 @@ and where that fit starts.
    gravity minus compensator: a dead band shows only in configurations whose unloaded
    joint torque is near zero or reversed by the load. That preload is set by `Kc·s0`,
    which deflections determine only weakly (the nominal fit may even return a negative
-   spring), and the χ² of such a candidate is piecewise flat in `Kc·s0` (measured: on
-   data with a hidden joint-2 dead band, χ² 133 within ±1.5 % of the true `Kc·s0` and
-   183–430 outside), so a local fit from the nominal optimum does not find it. The scan
+   spring), and the χ² of such a candidate is piecewise flat in `Kc·s0` (low only
+   within a few per cent of the true value), so a local fit from the nominal optimum
+   does not find it. The scan
    evaluates the candidate over a grid of `Kc·s0` (`PRELOAD_FACTORS` × the robot
    file's, at the file's `Kc`) with the compliances refitted linearly, and if its best
    point beats the score, the full fit starts there. Predictions do not depend on the

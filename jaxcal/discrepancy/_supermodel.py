@@ -4,21 +4,24 @@ screening Jacobians.
 
 Every candidate is "absent" at parameter value 0, so the nominal model *is* the super
 model with all candidate parameters at 0, and a candidate fit frees the nominal
-parameters plus that candidate's. Fits are optimistix Levenberg–Marquardt
-(`optx.least_squares`, `SmallQR` linear solves) on the full equilibrium model
-(`jaxcal._model.equilibrium.measured_deflections`, the predictor identify uses too:
+parameters plus that candidate's. Fits use jaxcal's one Levenberg–Marquardt solver
+(`levenberg_marquardt`, as identify and Monte-Carlo do) on the full equilibrium model
+(`measured_deflections`, the predictor identify uses too:
 implicit-function derivatives whose linear solve never raises), `jax.vmap`-ed over a
 batch of fits (seeds × candidates; `chunk_size()` members per call). Which parameters
 a fit frees is *traced* (indices of `SLOTS` candidate parameters and a 0/1 mask), so
 one compile per robot structure and design shape serves everything.
 
-Why not `jaxcal.nonlinear_fit`: its free set is static (one compile per candidate,
+Why not the whole of `jaxcal.nonlinear_fit`: its free set is static (one compile per candidate,
 ~17, each minutes on two cores) and its compiled program holds four copies of the model
 (LM step, final prediction, two final Jacobians); this loop holds two (the LM step's
 residual-and-Jacobian and the final one) and the free set is data.
 """
 
 from __future__ import annotations
+
+import copy
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -27,23 +30,24 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._batching import map_in_chunks
-from .._io import Dataset
-from .._linalg.dense import SmallQR
+from .._batching import chunk_width, map_in_chunks
+from .._identification.lsq import levenberg_marquardt, masked_covariance
+from .._io import Dataset, configurations
 from .._model.candidates import Candidate
 from .._model.equilibrium import measured_deflections, with_unloaded
 from .._robot import URAD, Robot
+from .._solution import RESULTS, result_of
 
-__all__ = ["SuperModel", "BatchFit", "configuration_groups"]
+__all__ = ["SuperModel", "BatchFit"]
 
 
 def chunk_size() -> int:
     """Batch members per call of the compiled functions (batches are padded to a
     multiple, so one compile serves every batch size). Under `vmap` a batch of fits
     steps until its slowest member stops; on a CPU a fit costs the same per LM step
-    alone or in a batch (measured: 16 ms per member-step at 1, 2 or 8), so one member
-    per call wastes nothing; an accelerator gains from width."""
-    return 1 if jax.default_backend() == "cpu" else 8
+    alone or in a batch, so one member per call wastes nothing; an accelerator gains
+    from width."""
+    return chunk_width(cpu=1, accelerator=8)
 
 
 _COMPILED: dict = {}
@@ -62,13 +66,6 @@ MAX_STEPS = 128
 STEPS_PER_CALL = MAX_STEPS
 
 
-def configuration_groups(q) -> np.ndarray:
-    """Index of each row's configuration: rows with the same q (to 1e-9 rad) share one."""
-    key = np.round(np.asarray(q, float), 9)
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    return inv.reshape(-1)
-
-
 class BatchFit(eqx.Module):
     """Host-side result of a batch of fits (numpy arrays, batch first).
 
@@ -81,6 +78,8 @@ class BatchFit(eqx.Module):
     equilibrium at the result converged and the residuals are finite (χ² is a value of
     the model); `well` the Jacobian has full rank (the covariance exists); `ok` all three.
     A valid, well-posed fit that ran out of steps still bounds the minimum χ² from above.
+    `result` says the same in the `RESULTS` vocabulary: `equilibrium_failed` (not
+    valid), `not_converged`, `rank_deficient`, in that order.
     """
 
     params: np.ndarray
@@ -97,6 +96,29 @@ class BatchFit(eqx.Module):
     @property
     def ok(self) -> np.ndarray:
         return self.converged & self.valid & self.well
+
+    @property
+    def result(self) -> RESULTS:
+        return result_of(
+            (self.valid, RESULTS.equilibrium_failed),
+            (self.converged, RESULTS.not_converged),
+            (self.well, RESULTS.rank_deficient),
+        )
+
+
+class _Evaluation(NamedTuple):
+    """One call of the compiled function, per batch member (host arrays): parameters
+    (fitted, or as given), residuals `target − model` (n, 3) m, χ², the σ-weighted
+    Jacobian of the residual (3n, nominal + slot columns), whether LM met its
+    tolerances, whether the model is valid there, and LM steps taken."""
+
+    params: np.ndarray
+    residuals: np.ndarray
+    chi2: np.ndarray
+    jac: np.ndarray
+    solved: np.ndarray
+    valid: np.ndarray
+    steps: np.ndarray
 
 
 class SuperModel:
@@ -127,7 +149,7 @@ class SuperModel:
         self.scale = np.concatenate([nom_scale, np.asarray(cand_scale, float)])
         self.n = len(data)
         self.use_moment = data.has_moments
-        self.set_design(data)
+        self.groups, self.design = self._design(data)
         # Compiled functions are shared by every SuperModel with the same robot
         # structure, candidate list and moment use (robot values and the design are
         # arguments); shapes (rows, configurations) are keyed by jit itself.
@@ -137,16 +159,24 @@ class SuperModel:
             self.use_moment,
         )
 
-    def set_design(self, data: Dataset) -> None:
-        """Use the configurations and loads of `data` (same number of rows and of
-        distinct configurations keeps the compiled functions)."""
+    def with_design(self, data: Dataset) -> SuperModel:
+        """The same model over the configurations and loads of `data`, which must have
+        as many rows (and as many distinct configurations, to share the compiled
+        functions). `self` is unchanged."""
         if len(data) != self.n:
             raise ValueError(f"data must have {self.n} rows, got {len(data)}")
-        inv = configuration_groups(data.q)
-        first = np.array([np.flatnonzero(inv == g)[0] for g in range(inv.max() + 1)])
-        self.groups = inv
-        q_unique = jnp.asarray(np.asarray(data.q)[first])
-        self.design = (*with_unloaded(data.q, data.force, data.moment, q_unique), jnp.asarray(inv))
+        other = copy.copy(self)
+        other.groups, other.design = self._design(data)
+        return other
+
+    @staticmethod
+    def _design(data: Dataset):
+        """Each row's configuration index and the predictor's inputs (rows and
+        zero-load configurations stacked, see `with_unloaded`)."""
+        q_unique, inv = configurations(data.q)
+        q_unique = jnp.asarray(q_unique, data.q.dtype)
+        rows = with_unloaded(data.q, data.force, data.moment, q_unique)
+        return inv, (*rows, jnp.asarray(inv))
 
     # -- the model ---------------------------------------------------------------------
 
@@ -214,12 +244,9 @@ class SuperModel:
         u0 = jnp.zeros(nn + SLOTS, p0.dtype)
 
         def run_fit(_):
-            # Householder QR in plain jnp (`SmallQR`): these fits run vmapped and batched
-            # LAPACK kernels can deadlock XLA's CPU pool (see `jaxcal._linalg.dense`).
-            solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL, linear_solver=SmallQR())
             sol = optx.least_squares(
                 lambda u, _: residual(u),
-                solver,
+                levenberg_marquardt(RTOL, ATOL),
                 u0,
                 max_steps=max_steps,
                 throw=False,
@@ -262,7 +289,7 @@ class SuperModel:
             target,
             sigma,
         )
-        return tuple(np.asarray(x) for x in out)
+        return _Evaluation(*(np.array(x) for x in out))
 
     def _default_sel(self, B: int, chosen=()) -> np.ndarray:
         """Slot indices: the `chosen` candidate parameters, padded with other distinct
@@ -285,7 +312,7 @@ class SuperModel:
             np.ones((B, self.n)),
             fit=False,
         )
-        return -out[1], out[5]
+        return -out.residuals, out.valid
 
     def jacobian(self, params, sigma) -> np.ndarray:
         """σ-weighted Jacobian of the model w.r.t. *every* parameter, (B, 3n, P), at
@@ -306,8 +333,8 @@ class SuperModel:
         )
         J = np.zeros((B, 3 * self.n, P))
         for j, (b, g) in enumerate(rows):
-            J[b][:, :nn] = out[3][j][:, :nn]
-            J[b][:, g] = out[3][j][:, nn : nn + len(g)]
+            J[b][:, :nn] = out.jac[j][:, :nn]
+            J[b][:, g] = out.jac[j][:, nn : nn + len(g)]
         return J
 
     # -- fitting -----------------------------------------------------------------------
@@ -352,49 +379,32 @@ class SuperModel:
         mask = np.zeros((B, nn + SLOTS))
         mask[:, :nn] = 1.0
         mask[:, nn:] = np.arange(SLOTS)[None, :] < extra[:, None]
-        out = [np.array(x) for x in self._call(start, sel, mask, target, sigma, fit=True)]
+        out = self._call(start, sel, mask, target, sigma, fit=True)
         while True:
-            again = np.flatnonzero(~out[4] & out[5] & (out[6] < max_steps))
+            again = np.flatnonzero(~out.solved & out.valid & (out.steps < max_steps))
             if not again.size:
                 break
             more = self._call(
-                out[0][again], sel[again], mask[again], target[again], sigma[again], fit=True
+                out.params[again], sel[again], mask[again], target[again], sigma[again], fit=True
             )
-            steps_before = out[6][again]
-            for k, x in enumerate(more):
-                out[k][again] = x
-            out[6][again] += steps_before
+            steps_before = out.steps[again]
+            for mine, x in zip(out, more, strict=True):
+                mine[again] = x
+            out.steps[again] += steps_before
         p, res, chi2, Jw, solved, valid, steps = out
         jac = np.zeros((B, 3 * self.n, P))
         cov = np.zeros((B, P, P))
         well = np.zeros(B, bool)
         for b in range(B):
+            m = nn + extra[b]
             cols = np.concatenate([np.arange(nn), sel[b][: extra[b]]]).astype(int)
-            jb = np.concatenate([Jw[b][:, :nn], Jw[b][:, nn : nn + extra[b]]], axis=1)
-            jac[b][:, cols] = jb
-            c, w = _covariance(jb)
-            cov[b][np.ix_(cols, cols)] = c
-            well[b] = w
+            jac[b][:, cols] = Jw[b][:, :m]
+            c, w = _covariance(Jw[b], mask[b])
+            cov[b][np.ix_(cols, cols)] = np.asarray(c)[:m, :m]
+            well[b] = bool(w)
         return BatchFit(p, free, chi2, res, jac, cov, steps, solved, valid, well)
 
 
-#: Relative eigenvalue floor of the unit-diagonal normal matrix below which a fit is
-#: rank deficient (float64 round-off ~1e-16; four decades of margin).
-RCOND = 1e-12
-
-
-def _covariance(J: np.ndarray) -> tuple[np.ndarray, bool]:
-    """`(JᵀJ)⁻¹` on the host (numpy, outside jit) and whether it is well posed: the
-    Jacobi-scaled normal matrix must pass the eigenvalue test; never inverts a singular
-    matrix (NaN instead)."""
-    N = J.T @ J
-    d = np.sqrt(np.diag(N))
-    if not np.all(d > 0) or not np.all(np.isfinite(N)):
-        return np.full(N.shape, np.nan), False
-    Ns = N / np.outer(d, d)
-    lam = np.linalg.eigvalsh(Ns)
-    if lam[0] <= RCOND * lam[-1]:
-        return np.full(N.shape, np.nan), False
-    L = np.linalg.cholesky(Ns)
-    Linv = np.linalg.solve(L, np.eye(len(d)))
-    return (Linv.T @ Linv) / np.outer(d, d), True
+#: The covariance of one fit (its free columns marked by its mask): `masked_covariance`
+#: keeps one shape, so one compile, for every free set and batch size.
+_covariance = jax.jit(masked_covariance)

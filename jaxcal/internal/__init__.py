@@ -12,6 +12,11 @@ from .._cli.main import (
     main as main,
 )
 from .._identification.identify import nonlinear_jit as nonlinear_jit
+from .._identification.lsq import (
+    covariance_from_jacobian as covariance_from_jacobian,
+    levenberg_marquardt as levenberg_marquardt,
+    masked_covariance as masked_covariance,
+)
 from .._identification.methods import (
     full_model_predictor as full_model_predictor,
     solve_linear_jit as solve_linear_jit,
@@ -23,6 +28,7 @@ from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
 from .._model.simulate import batch_deflections as batch_deflections
 from .._robot import URAD as URAD, G as G
+from .._solution import counts as counts, messages as messages
 from ..compensation._path import compensate_rows as compensate_rows
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian
@@ -39,6 +45,7 @@ from ..discrepancy._screening import (
     candidate_free as candidate_free,
     preload_scan as preload_scan,
 )
+from ..discrepancy._supermodel import BatchFit as BatchFit
 from ..montecarlo._chunk import make_chunk_fn as make_chunk_fn
 from ..montecarlo._methods import TrialFit as TrialFit
 from ..montecarlo._stats import MomentAccumulator as MomentAccumulator

@@ -1,5 +1,5 @@
 """One compiled Monte-Carlo chunk: per-trial noise from the global trial index, the
-vmapped identification, and the chunk's sufficient statistics (see `_montecarlo`).
+vmapped identification, and the chunk's sufficient statistics (see `_study.py`).
 
 The trial axis is sharded over a device mesh; only the reductions communicate."""
 
@@ -14,7 +14,12 @@ import jax.numpy as jnp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, Float
 
-__all__ = ["ChunkOut", "make_chunk_fn", "trial_noise"]
+from .._solution import NAMES, RESULTS, result_of
+
+__all__ = ["ChunkOut", "REASONS", "make_chunk_fn", "trial_noise"]
+
+#: The failure reasons a chunk counts, in the order of `ChunkOut.failures`.
+REASONS = NAMES[1:]
 
 
 def trial_noise(
@@ -44,6 +49,7 @@ def trial_noise(
 class ChunkOut(NamedTuple):
     n: Array
     failed: Array
+    failures: Array
     mean: Array
     m2: Array
     covered: Array
@@ -69,14 +75,24 @@ def make_chunk_fn(
     def run(key, start, total, d0, sigma, true, force, moment):
         # The noise-free fit: its estimate is the method's limit (model bias) and its
         # covariance the design's analytic one (unbatched; negligible next to a chunk).
-        nf_est, nf_std, _, _, nf_ok = fit(d0, sigma, force, moment)
+        nf_est, nf_std, _, _, nf_outcome = fit(d0, sigma, force, moment)
+        nf_ok = nf_outcome == RESULTS.successful if isinstance(nf_outcome, RESULTS) else nf_outcome
         idx = start + jnp.arange(chunk, dtype=jnp.int64)
         # The trial axis is split over the devices; everything per trial (noise,
         # identification) is independent, so only the reductions below communicate.
         idx = jax.lax.with_sharding_constraint(idx, trial_spec)
         noise = jax.vmap(lambda i: trial_noise(key, i, sigma, student_t))(idx)
-        est, std, lo, hi, ok = jax.vmap(lambda e: fit(d0 + e, sigma, force, moment))(noise)
-        ok = ok & jnp.all(jnp.isfinite(est), axis=1) & jnp.all(jnp.isfinite(std), axis=1)
+        est, std, lo, hi, outcome = jax.vmap(lambda e: fit(d0 + e, sigma, force, moment))(noise)
+        finite = jnp.all(jnp.isfinite(est), axis=1) & jnp.all(jnp.isfinite(std), axis=1)
+        # A method reports its outcome as `RESULTS` (why a trial failed) or as a plain
+        # success flag; non-finite estimates fail either way.
+        checks = (
+            (lambda o, f: result_of((o, RESULTS.not_converged), (f, RESULTS.nonfinite)))
+            if not isinstance(outcome, RESULTS)
+            else (lambda o, f: RESULTS.where(f, o, RESULTS.nonfinite))
+        )
+        result = jax.vmap(checks)(outcome, finite)
+        ok = result == RESULTS.successful
         valid = idx < total
         w = valid & ok
         n = jnp.sum(w)
@@ -88,6 +104,7 @@ def make_chunk_fn(
         covered = jnp.sum(inside, axis=0)
         std_sum = jnp.sum(jnp.where(w[:, None], std, 0.0), axis=0)
         failed = jnp.sum(valid & ~ok)
+        failures = jnp.stack([jnp.sum(valid & (result == getattr(RESULTS, r))) for r in REASONS])
         hist = None
         if bins is not None:
             lo_edge = nf_est - 6.0 * nf_std
@@ -103,6 +120,7 @@ def make_chunk_fn(
         return ChunkOut(
             n,
             failed,
+            failures,
             mean,
             m2,
             covered,

@@ -1,8 +1,8 @@
 """Adapters from the identification methods to the per-trial function a Monte-Carlo
 study vmaps: `fit(deflection (n, 3) m, sigma (n,) m) -> (estimate, std, ci_lo, ci_hi,
-ok)`, plus the parameter names and their true values.
+outcome)`, plus the parameter names and their true values.
 
-The identification functions of `jaxcal._identification.methods` are used when present; they
+The identification functions of `_identification/` are used when present; they
 are pure in the deflections, so under `jax.vmap` everything that depends only on the
 design (observation matrices, factorisations) is computed once per chunk, not per
 trial.
@@ -29,8 +29,9 @@ _AGG = re.compile(r"^k2@(-?[0-9.eE+-]+)deg_urad_per_Nm$")
 
 
 class TrialFit(NamedTuple):
-    """`fit(d, sigma, force, moment) -> (estimate, std, ci_lo, ci_hi, ok)` for one
+    """`fit(d, sigma, force, moment) -> (estimate, std, ci_lo, ci_hi, outcome)` for one
     trial (deflections, σ, loads traced: one compiled study serves any load level);
+    `outcome` is a `RESULTS` item, or a success flag for methods that give no reason;
     `names` and `true` values of the estimated parameters; the design's `force` and
     `moment`; `unidentifiable()` names the parameters the design cannot determine
     (called only when the noise-free fit fails)."""
@@ -89,7 +90,7 @@ def true_values(robot: Robot, design: Dataset, names: Sequence[str]) -> np.ndarr
 
 def _from_result(r):
     ci = r.ci95
-    return r.estimate, r.std, ci[:, 0], ci[:, 1], jnp.all(jnp.asarray(r.converged))
+    return r.estimate, r.std, ci[:, 0], ci[:, 1], r.result
 
 
 def trial_fit(

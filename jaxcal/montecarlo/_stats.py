@@ -105,7 +105,8 @@ class MonteCarloResult:
     - `coverage95`: fraction of successful trials whose reported 95 % interval contains
       `true`.
     - `trials`, `failed`: trials run and trials that failed (not converged or
-      non-finite); failed trials are excluded from every statistic.
+      non-finite); failed trials are excluded from every statistic. `failures` counts
+      them by reason, named as in `RESULTS` (e.g. `{"not_converged": 3}`).
     - `seconds`, `compile_seconds`: run time without compilation, and compilation time.
     - `estimates`: `(trials − failed, p)` successful estimates in trial order, only
       with `keep_estimates=True`.
@@ -136,6 +137,7 @@ class MonteCarloResult:
     estimates: np.ndarray | None = None
     histogram: np.ndarray | None = None
     histogram_edges: np.ndarray | None = None
+    failures: dict[str, int] = field(default_factory=dict)
 
     @property
     def bias(self) -> np.ndarray:
@@ -186,6 +188,7 @@ class MonteCarloResult:
             "method": self.method,
             "trials": self.trials,
             "failed": self.failed,
+            "failures": dict(self.failures),
             "seconds": self.seconds,
             "compile_seconds": self.compile_seconds,
             "trials_per_s": self.trials_per_s,

@@ -37,7 +37,7 @@ from .._identification.identify import METHODS
 from .._io import Dataset
 from .._model.simulate import DeflectionError, model_deflections
 from .._robot import Robot
-from ._chunk import ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn, trial_noise
+from ._chunk import REASONS, ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn, trial_noise
 from ._methods import TrialFit, trial_fit
 from ._stats import MomentAccumulator, MonteCarloResult
 
@@ -240,6 +240,7 @@ def run_study(
     t0 = time.perf_counter()
 
     first: list[_ChunkOut] = []
+    failures = np.zeros(len(REASONS), np.int64)
 
     def diagnose() -> None:
         bad = tf.unidentifiable()
@@ -258,6 +259,7 @@ def run_study(
                 raise ValueError(
                     f"the {method} identification fails on the noise-free data of this design"
                 )
+        failures[:] += np.asarray(out.failures)
         acc.merge(
             int(out.n),
             int(out.failed),
@@ -314,6 +316,7 @@ def run_study(
         coverage95=acc.coverage(),
         trials=trials,
         failed=acc.failed,
+        failures={r: int(k) for r, k in zip(REASONS, failures, strict=True) if k},
         seconds=seconds,
         compile_seconds=t_compile,
         noise_std=float(np.asarray(sigma).mean()),

@@ -1,0 +1,46 @@
+"""The parts of optimistix's private API that jaxcal relies on, pinned (pyproject.toml
+bounds optimistix to the versions that pass these tests).
+
+- `nonlinear_fit` reads the Jacobian and residuals of the last accepted point from
+  `sol.state.aux` (no further evaluation of the model after the solve; `sol.aux` is
+  the evaluation one step earlier, not at the returned point);
+- the stall check of jaxcal's Levenberg–Marquardt reads `state.y_eval`,
+  `state.num_steps_since_acceptance` and `state.first_step`.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from jaxcal.internal import levenberg_marquardt
+
+X = jnp.linspace(0.0, 1.0, 12)
+Y = 1.5 * jnp.exp(-0.7 * X) + 0.01 * jnp.sin(40 * X)  # not an exact fit: residuals stay
+
+
+def _fn(y, _):
+    model = y[0] * jnp.exp(y[1] * X)
+    r = model - Y
+    return r, (r, model, y * 2.0)
+
+
+def test_final_state_aux_is_the_evaluation_at_the_returned_point():
+    solver = levenberg_marquardt(rtol=1e-8, atol=1e-8)
+    sol = optx.least_squares(
+        _fn, solver, jnp.array([1.0, 0.0]), has_aux=True, max_steps=200, throw=False
+    )
+    assert sol.result == optx.RESULTS.successful
+    r, model, twice = sol.state.aux
+    r_at, model_at, twice_at = _fn(sol.value, None)[1]
+    np.testing.assert_allclose(np.asarray(twice), np.asarray(twice_at), rtol=0, atol=0)
+    np.testing.assert_allclose(np.asarray(r), np.asarray(r_at), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(model), np.asarray(model_at), rtol=0, atol=1e-15)
+
+
+def test_state_fields_read_by_the_stall_check():
+    solver = levenberg_marquardt(rtol=1e-8, atol=1e-8)
+    y0 = jnp.array([1.0, 0.0])
+    state = solver.init(_fn, y0, None, {}, jnp.zeros(12), (jnp.zeros(12),) * 2 + (y0,), frozenset())
+    for name in ("y_eval", "num_steps_since_acceptance", "first_step", "aux"):
+        assert hasattr(state, name), name
+    assert state.y_eval.shape == y0.shape
