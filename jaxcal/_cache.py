@@ -10,6 +10,8 @@ Where the cache lives: `$JAXCAL_CACHE_DIR` if set (`off` disables it), else
 `$XDG_CACHE_HOME/jaxcal`, else `~/.cache/jaxcal`. A directory that cannot be created or
 written is a warning, never a failure: jaxcal then simply compiles as without a cache.
 JAX itself warns and recompiles when an entry cannot be read (e.g. a corrupt file).
+Beside XLA's executables the directory keeps the traced form of the largest programs
+(`exported/`, see `_exported.py`), so that a warm run skips tracing them as well.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import warnings
 from pathlib import Path
 
 import jax
+
+from ._exported import set_export_directory
 
 __all__ = [
     "cache_dir",
@@ -98,6 +102,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | No
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     _reset()
+    set_export_directory(target)
     return target
 
 
@@ -105,6 +110,7 @@ def disable_compilation_cache() -> None:
     """Stop reading and writing the persistent cache in this process."""
     jax.config.update("jax_compilation_cache_dir", None)
     _reset()
+    set_export_directory(None)
 
 
 def _reset() -> None:

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._exported import exported
 from .._io import Dataset, configurations, q2_groups
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
@@ -365,9 +366,20 @@ def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps):
     return nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps)
 
 
+#: The same program, kept traced on disk while the compilation cache is on: tracing it
+#: is most of a warm `jaxcal identify`.
+_nonlinear_stored = exported(nonlinear_jit)
+
+
 def _nonlinear(robot, data, free, loss, delta, steps):
     u, inv = configurations(data.q)
-    return nonlinear_jit(robot, data, jnp.asarray(u), jnp.asarray(inv), free, loss, delta, steps)
+    # Row labels and the file name do not enter the computation: leaving them out lets
+    # one stored program serve every data set of the same shape.
+    plain = Dataset(data.q, data.force, data.moment, data.deflection, data.sigma)
+    res = _nonlinear_stored(
+        robot, plain, jnp.asarray(u), jnp.asarray(inv), free, loss, delta, steps
+    )
+    return res
 
 
 def _linear(robot, data, free):

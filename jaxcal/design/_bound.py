@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._exported import exported
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
 from ._constraints import design_bounds, design_loads, horizontal_loads
@@ -170,6 +171,7 @@ def _stats(A, mask, wdiag, sigma2, criterion, w):
     return phi, jnp.where(mask, d, 0.0)
 
 
+@exported
 @eqx.filter_jit
 def _rounds(A, masks, w, wdiag, sigma2, criterion: str, steps: int):
     # `steps` multiplicative updates of every choice (leading axis), then φ and max d.

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._exported import exported
 from .._io import q2_groups
 from .._linalg.dense import cholesky, solve_lower
 from .._robot import Robot
@@ -376,6 +377,7 @@ def select_parameters(
     return idx
 
 
+@exported
 @eqx.filter_jit
 def observe_jit(robot, q, force, moment, parameters, groups, n_groups, include_k1, model):
     """`design_observation` compiled, with every setting positional (host-side callers:

@@ -50,6 +50,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .._exported import exported
 from .._io import Dataset
 from .._robot import Robot
 from ._bound import DesignBound, design_bound, has_bound
@@ -129,6 +130,7 @@ def _penalised(z, args):
     return log_value(problem, c) + weight * pen
 
 
+@exported
 @eqx.filter_jit
 def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: float):
     # One penalty round for all starts, and everything the host needs to pick the best
@@ -221,6 +223,7 @@ def _check_x64(robot: Robot) -> None:
         )
 
 
+@exported
 @eqx.filter_jit
 def pool_values(problem: DesignProblem, q):
     # The criterion of a batch of designs (one compiled program per problem and batch).

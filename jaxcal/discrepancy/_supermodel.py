@@ -31,6 +31,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._batching import chunk_width, map_in_chunks
+from .._exported import exported
 from .._identification.lsq import levenberg_marquardt, masked_covariance
 from .._io import Dataset, configurations
 from .._model.candidates import Candidate
@@ -200,7 +201,7 @@ class SuperModel:
 
     def _compiled(self):
         if self._key not in _COMPILED:
-            _COMPILED[self._key] = eqx.filter_jit(self._batched)
+            _COMPILED[self._key] = exported(eqx.filter_jit(self._batched), tag=repr(self._key))
         return _COMPILED[self._key]
 
     def _one(self, robot, design, scale, p0, sel, mask, target, sigma, fit, max_steps):

@@ -11,6 +11,11 @@ from .._cli.main import (
     fix_names as fix_names,
     main as main,
 )
+from .._exported import (
+    export_directory as export_directory,
+    exported as exported,
+    set_export_directory as set_export_directory,
+)
 from .._identification.identify import nonlinear_jit as nonlinear_jit
 from .._identification.lsq import (
     covariance_from_jacobian as covariance_from_jacobian,

@@ -1,0 +1,155 @@
+"""Traced programs kept on disk (`jax.export`), so that a new process skips tracing too.
+
+With the persistent compilation cache on, a new process still traces and lowers every
+jitted program, because the cache is looked up by the lowered program. For jaxcal's
+largest programs that is most of the wait once XLA's compile is cached: tracing the
+nonlinear identification (Levenberg–Marquardt around the full equilibrium) takes about
+2.4 s of a 4 s warm `jaxcal identify` on two cores. `exported(fn)` keeps the lowered
+program of `fn` (serialised by `jax.export`) in the cache directory's `exported/`
+folder; a later process deserialises and calls it, and XLA's compile of it is then a
+hit of the compilation cache.
+
+The key of a stored program is everything the traced program depends on: jaxcal's own
+source (a hash of its files), JAX's version, the backend, float64 on or off, the
+arguments' structure and static (non-array) values, and every array's shape and dtype.
+A change of any of them stores a new program. It is on only while the compilation cache
+is (`enable_compilation_cache`), and a program that cannot be exported or read back is
+simply traced as without it.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.core
+
+__all__ = ["export_directory", "exported", "set_export_directory"]
+
+_DIR: Path | None = None
+_LOADED: dict[str, Any] = {}
+_UNEXPORTABLE = b"unexportable"
+
+
+def export_directory() -> Path | None:
+    """The cache directory whose `exported/` folder is in use, or `None` when off."""
+    return None if _DIR is None else _DIR.parent
+
+
+def set_export_directory(path: Path | None) -> None:
+    """Where stored programs live (`<compilation cache>/exported`), or `None` for off."""
+    global _DIR
+    _DIR = None if path is None else Path(path) / "exported"
+    _LOADED.clear()
+
+
+@functools.cache
+def _source_hash() -> str:
+    h = hashlib.sha256()
+    root = Path(__file__).parent
+    for f in sorted(root.rglob("*.py")):
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
+    parts = [
+        f"{fn.__module__}.{fn.__qualname__}",
+        tag,
+        _source_hash(),
+        jax.__version__,
+        jax.default_backend(),
+        str(jax.config.jax_enable_x64),  # pyright: ignore[reportAttributeAccessIssue]
+        str(treedef),
+        repr(statics),
+        repr([(a.shape, str(a.dtype)) for a in arrays]),
+    ]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+
+
+def _write(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".probe-")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    os.replace(tmp, path)
+
+
+def exported(fn: Callable, tag: str = "") -> Callable:
+    """`fn` (a jitted function of pytrees of arrays and static values) that keeps its
+    traced program on disk while the compilation cache is on; otherwise `fn` itself.
+    `tag` names what else the program depends on (e.g. the closure of a bound method)."""
+
+    @functools.wraps(fn)
+    def call(*args):
+        leaves, treedef = jax.tree.flatten(args)
+        if _DIR is None or any(isinstance(x, jax.core.Tracer) for x in leaves):
+            return fn(*args)
+        is_arr = [eqx.is_array(x) for x in leaves]
+        arrays = [x for x, a in zip(leaves, is_arr, strict=True) if a]
+        statics = [x for x, a in zip(leaves, is_arr, strict=True) if not a]
+        key = _key(fn, tag, treedef, arrays, statics)
+        got = _LOADED.get(key) or _load(_DIR / f"{key}-cache")
+        if got is None:
+            got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache")
+        _LOADED[key] = got
+        if got == _UNEXPORTABLE:
+            return fn(*args)
+        run, skeleton = got
+        flat, out_def = jax.tree.flatten(skeleton, is_leaf=lambda x: x is None)
+        # Committed and uncommitted arguments lower to different calls (a second compile
+        # of the whole program): commit them all to the default device.
+        device = jax.devices()[0]
+        outs = iter(run(*(jax.device_put(a, device) for a in arrays)))
+        return jax.tree.unflatten(out_def, [next(outs) if x is None else x for x in flat])
+
+    return call
+
+
+def _load(path: Path):
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    if data == _UNEXPORTABLE:
+        return _UNEXPORTABLE
+    try:
+        blob, skeleton = pickle.loads(data)
+        return jax.jit(jax.export.deserialize(bytearray(blob)).call), skeleton
+    except Exception:
+        return None  # a stale or corrupt entry: export again
+
+
+def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
+    skeleton: list = []
+
+    def flat(*xs):
+        it = iter(xs)
+        full = [next(it) if a else x for x, a in zip(leaves, is_arr, strict=True)]
+        out = fn(*jax.tree.unflatten(treedef, full))
+        skeleton.append(eqx.filter(out, eqx.is_array, inverse=True))
+        return jax.tree.leaves(eqx.filter(out, eqx.is_array))
+
+    try:
+        specs = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in arrays]
+        exp = jax.export.export(jax.jit(flat))(*specs)
+        data = pickle.dumps((bytes(exp.serialize()), skeleton[0]))
+    except ImportError:
+        return _UNEXPORTABLE  # serialisation needs `flatbuffers`; nothing to remember
+    except Exception:
+        # e.g. a host callback in the program: remember, so later runs do not try again
+        data, exp = _UNEXPORTABLE, None
+    try:
+        _write(path, data)
+    except OSError:
+        pass  # an unwritable cache is the compilation cache's warning to give
+    return _UNEXPORTABLE if exp is None else (jax.jit(exp.call), skeleton[0])

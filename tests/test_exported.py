@@ -1,0 +1,83 @@
+"""Traced programs kept on disk (`jaxcal/_exported.py`): the stored program gives the
+same results as the jitted function, a new process (simulated by forgetting what was
+loaded) reads it instead of tracing, and anything unusual falls back to plain jit."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcal.internal import export_directory, exported, set_export_directory
+
+TRACES = []
+
+
+class Out(eqx.Module):
+    value: jax.Array
+    total: jax.Array
+    label: str = eqx.field(static=True)
+
+
+@eqx.filter_jit
+def _f(z, w, power: int):
+    TRACES.append(power)
+    return Out(z**power * w + 1.0, jnp.sum(z), f"power {power}")
+
+
+f = exported(_f)
+
+
+@pytest.fixture
+def store(tmp_path):
+    before = export_directory()
+    set_export_directory(tmp_path)
+    yield tmp_path / "exported"
+    set_export_directory(before)
+
+
+def _forget(store):
+    # A new process: nothing loaded (setting the directory forgets what was).
+    set_export_directory(store.parent)
+
+
+def test_stored_program_matches_and_skips_tracing(store):
+    z, w = jnp.arange(4.0), jnp.asarray(0.5)
+    want = _f(z, w, 3)
+    TRACES.clear()
+    got = f(z, w, 3)
+    assert TRACES == [3]  # traced once, to export
+    assert got.label == "power 3"
+    np.testing.assert_array_equal(np.asarray(got.value), np.asarray(want.value))
+    np.testing.assert_array_equal(np.asarray(got.total), np.asarray(want.total))
+    assert len(list(store.glob("*-cache"))) == 1
+    _forget(store)
+    TRACES.clear()
+    again = f(z + 1.0, w, 3)  # same shapes and statics: the stored program
+    assert TRACES == []
+    np.testing.assert_allclose(np.asarray(again.value), np.asarray((z + 1.0) ** 3 * 0.5 + 1))
+    # Another static value or shape is another program.
+    f(z, w, 2)
+    f(jnp.arange(5.0), w, 3)
+    assert len(list(store.glob("*-cache"))) == 3
+
+
+def test_corrupt_entry_is_exported_again(store):
+    z, w = jnp.arange(3.0), jnp.asarray(2.0)
+    f(z, w, 1)
+    (entry,) = store.glob("*-cache")
+    entry.write_bytes(b"not a program")
+    _forget(store)
+    out = f(z, w, 1)
+    np.testing.assert_allclose(np.asarray(out.value), np.asarray(z * 2.0 + 1.0))
+    assert entry.read_bytes() != b"not a program"
+
+
+def test_off_and_under_transformations_it_is_the_plain_function(store):
+    z = jnp.arange(3.0)
+    out = jax.vmap(lambda a: f(a, jnp.asarray(2.0), 2).value)(jnp.stack([z, z + 1]))
+    np.testing.assert_allclose(np.asarray(out[1]), np.asarray((z + 1) ** 2 * 2 + 1))
+    assert not list(store.glob("*-cache"))
+    set_export_directory(None)
+    f(z, jnp.asarray(2.0), 2)
+    assert not list(store.glob("*-cache"))
