@@ -362,8 +362,8 @@ def plausibility(robot: Robot, res: IdentificationResult) -> list[str]:
 
 # Module-level jitted cores: repeated calls with equal shapes reuse one compilation.
 @eqx.filter_jit
-def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps):
-    return nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps)
+def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps, moments: bool = True):
+    return nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps, moments)
 
 
 #: The same program, kept traced on disk while the compilation cache is on: tracing it
@@ -376,10 +376,19 @@ def _nonlinear(robot, data, free, loss, delta, steps):
     # Row labels and the file name do not enter the computation: leaving them out lets
     # one stored program serve every data set of the same shape.
     plain = Dataset(data.q, data.force, data.moment, data.deflection, data.sigma)
-    res = _nonlinear_stored(
-        robot, plain, jnp.asarray(u), jnp.asarray(inv), free, loss, delta, steps
+    # Whether the rows carry tool moments is decided here, on the host: inside the
+    # compiled fit the data are traced and a moment-free model could not be chosen.
+    return _nonlinear_stored(
+        robot,
+        plain,
+        jnp.asarray(u),
+        jnp.asarray(inv),
+        free,
+        loss,
+        delta,
+        steps,
+        data.has_moments,
     )
-    return res
 
 
 def _linear(robot, data, free):

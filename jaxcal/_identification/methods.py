@@ -153,15 +153,20 @@ def _has_moments(data: Dataset) -> bool:
         return True
 
 
-def full_model_predictor(robot: Robot, data: Dataset, q_unique=None, inverse=None):
+def full_model_predictor(
+    robot: Robot, data: Dataset, q_unique=None, inverse=None, moments: bool | None = None
+):
     """`predict(p) -> ((n, 3) deflections m, (n,) ok)`: the full equilibrium model
     (`measured_deflections`) of every row for physical parameters `p` (user units),
     differentiable in `p` (forward mode). The unloaded equilibrium is solved once per
     distinct configuration (`q_unique`, `inverse` from `np.unique`, found here when
-    `data.q` is concrete)."""
+    `data.q` is concrete). `moments`: whether the rows carry tool moments (default: read
+    from the data where concrete, else assumed); without them the model is smaller."""
     if q_unique is None or inverse is None:
         q_unique, inverse = _unique_rows(data.q)
-    moment = data.moment if _has_moments(data) else None
+    if moments is None:
+        moments = _has_moments(data)
+    moment = data.moment if moments else None
     q_all, f_all, m_all = with_unloaded(data.q, data.force, moment, q_unique)
 
     def predict(p):
@@ -200,11 +205,13 @@ def _to_physical(u, s0_fixed: bool, s0_ref):
     return jnp.concatenate([u[:7], jnp.reshape(s0, (1,))])
 
 
-def nonlinear_with_groups(robot, data, q_u, inv, free, loss, huber_delta, max_steps):
+def nonlinear_with_groups(
+    robot, data, q_u, inv, free, loss, huber_delta, max_steps, moments: bool | None = None
+):
     if data.deflection is None:
         raise ValueError("data has no deflections to fit")
     mask = free_mask(robot, free)
-    predict = full_model_predictor(robot, data, q_u, inv)
+    predict = full_model_predictor(robot, data, q_u, inv, moments)
     p0 = get_parameters(robot)
     if robot.has_compensator:
         # The compensator's stiffness (eq. 10) is linear in Kc and Kc·s0, not in s0:
