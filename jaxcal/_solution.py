@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["RESULTS", "counts", "messages", "result_of"]
+__all__ = ["RESULTS", "messages", "result_of"]
 
 
 class RESULTS(eqx.Enumeration):
@@ -73,13 +73,3 @@ def messages(result) -> list[str]:
             out = np.full(hit.shape, "", dtype=object)
         out[hit] = RESULTS[getattr(RESULTS, n)]
     return [] if out is None else [str(m) for m in out]
-
-
-def counts(result) -> dict[str, int]:
-    """How many elements of a batched `RESULTS` item have each outcome (non-zero only)."""
-    out = {}
-    for n in NAMES:
-        k = int(np.sum(np.asarray(result == getattr(RESULTS, n))))
-        if k:
-            out[n] = k
-    return out

@@ -62,6 +62,14 @@ class ChunkOut(NamedTuple):
     nf_ok: Array
 
 
+def _as_result(outcome) -> RESULTS:
+    """A method's (batched) outcome as `RESULTS`: methods report one, or a plain success
+    flag (then a failure is `not_converged`)."""
+    if isinstance(outcome, RESULTS):
+        return outcome
+    return result_of((outcome, RESULTS.not_converged))
+
+
 def make_chunk_fn(
     fit: Callable,
     chunk: int,
@@ -76,7 +84,7 @@ def make_chunk_fn(
         # The noise-free fit: its estimate is the method's limit (model bias) and its
         # covariance the design's analytic one (unbatched; negligible next to a chunk).
         nf_est, nf_std, _, _, nf_outcome = fit(d0, sigma, force, moment)
-        nf_ok = nf_outcome == RESULTS.successful if isinstance(nf_outcome, RESULTS) else nf_outcome
+        nf_ok = _as_result(nf_outcome) == RESULTS.successful
         idx = start + jnp.arange(chunk, dtype=jnp.int64)
         # The trial axis is split over the devices; everything per trial (noise,
         # identification) is independent, so only the reductions below communicate.
@@ -84,14 +92,10 @@ def make_chunk_fn(
         noise = jax.vmap(lambda i: trial_noise(key, i, sigma, student_t))(idx)
         est, std, lo, hi, outcome = jax.vmap(lambda e: fit(d0 + e, sigma, force, moment))(noise)
         finite = jnp.all(jnp.isfinite(est), axis=1) & jnp.all(jnp.isfinite(std), axis=1)
-        # A method reports its outcome as `RESULTS` (why a trial failed) or as a plain
-        # success flag; non-finite estimates fail either way.
-        checks = (
-            (lambda o, f: result_of((o, RESULTS.not_converged), (f, RESULTS.nonfinite)))
-            if not isinstance(outcome, RESULTS)
-            else (lambda o, f: RESULTS.where(f, o, RESULTS.nonfinite))
+        # The method's own reason first; a non-finite estimate fails either way.
+        result = jax.vmap(lambda o, f: RESULTS.where(f, o, RESULTS.nonfinite))(
+            _as_result(outcome), finite
         )
-        result = jax.vmap(checks)(outcome, finite)
         ok = result == RESULTS.successful
         valid = idx < total
         w = valid & ok
@@ -103,8 +107,8 @@ def make_chunk_fn(
         inside = (lo <= true) & (true <= hi) & w[:, None]
         covered = jnp.sum(inside, axis=0)
         std_sum = jnp.sum(jnp.where(w[:, None], std, 0.0), axis=0)
-        failed = jnp.sum(valid & ~ok)
         failures = jnp.stack([jnp.sum(valid & (result == getattr(RESULTS, r))) for r in REASONS])
+        failed = jnp.sum(failures)
         hist = None
         if bins is not None:
             lo_edge = nf_est - 6.0 * nf_std
