@@ -306,6 +306,7 @@ def test_aggregated_design_at_most_half_of_random(robot):
         max_steps=300,
         model="linear",
         level_gap_deg=0.0,
+        q2_levels="free",
         bound_pool=0,
     )
     assert d.feasible
@@ -346,6 +347,7 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
         "bound_pool",
         "distinct",
         "repeats",
+        "q2_levels_deg",
         "configs_deg",
         "loads_N",
         "std",
@@ -355,6 +357,8 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
         "random_best",  # with --pool: the best of the random designs the starts came from
     }
     assert np.shape(res["configs_deg"]) == (12, 6)
+    levels = sorted({round(v, 6) for v in np.asarray(res["configs_deg"])[:, 1]})
+    assert res["q2_levels_deg"] == levels
     assert res["value"] <= res["random_best"]
     # The design's own configurations are in the bound's pool: efficiency in (0, 1].
     assert 0 < res["efficiency"] <= 1 and res["bound"] == pytest.approx(

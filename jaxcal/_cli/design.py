@@ -85,6 +85,15 @@ def register(sub) -> None:
         "recovered from them; 0 lets them merge",
     )
     p.add_argument(
+        "--q2-levels",
+        default="span",
+        metavar="LEVELS",
+        help="'span' (default: the first and last q2 level at the ends of the q2 range, "
+        "the others optimised; the paper's rule, it separates k2 from the compensator), "
+        "'free' (all optimised) or one value per group in deg, '-' for optimised, e.g. "
+        "-30,-,90",
+    )
+    p.add_argument(
         "--model",
         choices=("full", "linear"),
         default=None,
@@ -196,6 +205,31 @@ def _sizes(args: argparse.Namespace) -> tuple[int, int]:
     return n, r
 
 
+def _levels(text: str) -> str | tuple[float | None, ...]:
+    # --q2-levels: 'span', 'free' or a comma list of deg values and '-' (optimised).
+    if text in ("span", "free"):
+        return text
+    out: list[float | None] = []
+    for part in text.split(","):
+        part = part.strip()
+        if part == "-":
+            out.append(None)
+            continue
+        try:
+            out.append(float(part))
+        except ValueError:
+            raise ValueError(
+                f"--q2-levels: {part!r} is not a number or '-' (use 'span', 'free' or e.g. "
+                "-30,-,90)"
+            ) from None
+    return tuple(out)
+
+
+def _level_values(d) -> list[float]:
+    # The design's distinct q2 values (deg), ascending.
+    return sorted({round(float(v), 6) for v in np.rad2deg(d.q[:, 1])})
+
+
 def run_design(args: argparse.Namespace) -> int:
     from .._io import write_dataset
     from .._robot import load_robot
@@ -229,6 +263,7 @@ def run_design(args: argparse.Namespace) -> int:
         model=args.model,
         repeats=reps,
         level_gap_deg=args.level_gap,
+        q2_levels=_levels(args.q2_levels),
         bound_pool=args.bound_pool,
     )
     if args.output:
@@ -248,6 +283,7 @@ def run_design(args: argparse.Namespace) -> int:
                 "bound_pool": None if d.bound is None else d.bound.pool_size,
                 "distinct": len(d.q),
                 "repeats": reps,
+                "q2_levels_deg": _level_values(d),
                 "configs_deg": np.rad2deg(d.q),
                 "loads_N": d.force,
                 "std": dict(zip(c.names, np.asarray(c.std).tolist(), strict=True)),
@@ -268,6 +304,10 @@ def run_design(args: argparse.Namespace) -> int:
             f"approximate-design bound {d.bound.value:.6g} over {d.bound.pool_size} candidates"
             f"   efficiency {eff:.3f}"
         )
+    levels = _level_values(d)
+    if len(levels) < len(q):
+        shown = ", ".join(f"{v:g}" for v in levels)
+        print(f"q2 levels (deg): {shown}   (--q2-levels {args.q2_levels})")
     if reps > 1:
         print(f"{len(q)} distinct configurations, each measured {reps} times")
     if d.random_best is not None:

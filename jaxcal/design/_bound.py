@@ -29,7 +29,7 @@ on the levels a design uses. The pool is then a grid of q2 levels (plus the desi
 own), with candidates at each level, and the bound is the least over every choice of
 `G` levels (the design's number of groups) of that choice's approximate optimum: all
 choices are iterated in one vmap, and only those whose bound could still be the least
-are iterated further.
+are iterated further. Levels the problem fixes (`q2_levels_deg`) are in every choice.
 """
 
 from __future__ import annotations
@@ -250,10 +250,11 @@ def design_bound(
     agg = problem.parameters == "aggregated"
     inc = np.zeros((0, 6)) if include is None else np.asarray(include, float).reshape(-1, 6)
     levels = None
+    pins = [v for v in problem.q2_levels_deg or () if v is not None]
     if agg:
         lo, hi = (float(np.degrees(np.asarray(b)[1])) for b in design_bounds(robot))
         grid = np.arange(lo, hi + 1e-9, level_step_deg)
-        levels = np.unique(np.round(np.concatenate([grid, np.degrees(inc[:, 1])]), 6))
+        levels = np.unique(np.round(np.concatenate([grid, np.degrees(inc[:, 1]), pins]), 6))
         levels = np.array([v for v in levels if feasible_q3_range(robot, math.radians(v))])
     q, force, level = candidate_pool(robot, n, seed=seed, levels_deg=levels, loads=problem.loads)
     if len(inc):
@@ -279,10 +280,12 @@ def design_bound(
                 "level_step_deg"
             )
         gap = problem.level_gap_deg - 1e-6
+        # Fixed levels are part of the problem: only choices holding all of them.
+        need = set(np.searchsorted(levels, np.round(pins, 6)).tolist())
         choices = [
             s
             for s in itertools.combinations(range(n_levels), G)
-            if np.all(np.diff(levels[list(s)]) >= gap)
+            if np.all(np.diff(levels[list(s)]) >= gap) and need <= set(s)
         ]
         cols = np.asarray(
             [

@@ -10,7 +10,11 @@ criterion, and states the result's **efficiency** against the approximate-design
 joint-2 compliance per q2 level, 3 levels, k3..k6; k1 with horizontal loads), the trace
 of its covariance in µrad/(N·m), on the full equilibrium model linearised at the nominal
 values, the largest test load vertical in every configuration, the q2 levels at least 20°
-apart so that the compensator can be recovered from them (two-step or nonlinear fit).
+apart and the lowest and highest at the ends of the q2 range (`q2_levels="span"`, the
+paper's rule of section 5.2), so that the compensator can be recovered from them
+(two-step or nonlinear fit). The aggregated trace alone does not see the levels' spread:
+left free, its optimum puts them 20° apart in one half of the range, and the physical k2
+of the fit is then ~3x less precise than with the levels spread (`benchmarks/README.md`).
 The `physical` set (k, Kc, s0; relative errors) stays an option: there the trace is
 > 90 % the variance of Kc, which no 12-configuration design determines, and a warning
 says so. An explicit list (`parameters="k2,k3,k4"`) takes the marginal trace of those
@@ -82,14 +86,26 @@ def _bounds(problem: DesignProblem, dtype):
     return lo.astype(dtype), hi.astype(dtype)
 
 
+def _group_q2(problem: DesignProblem, v) -> Float[Array, " groups"]:
+    # The groups' q2 (rad): free ones from their variable, pinned ones constant (their
+    # variable is carried but unused, so every problem has one variable per group).
+    lo, hi = _bounds(problem, v.dtype)
+    q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
+    pins = problem.q2_levels_deg
+    if pins is None:
+        return q2
+    pinned = np.array([p is not None for p in pins])
+    value = np.deg2rad([0.0 if p is None else p for p in pins])
+    return jnp.where(pinned, jnp.asarray(value, v.dtype), q2)
+
+
 def _decode(problem: DesignProblem, z) -> Float[Array, "m 6"]:
     u, v = z
     lo, hi = _bounds(problem, u.dtype)
     q = lo + (hi - lo) * jax.nn.sigmoid(u)
     g = problem.group_index
     if g is not None:
-        q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
-        q = q.at[:, 1].set(q2[jnp.asarray(g)])
+        q = q.at[:, 1].set(_group_q2(problem, v)[jnp.asarray(g)])
     return q
 
 
@@ -113,8 +129,7 @@ def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
     G = problem.n_groups
     if problem.group_index is None or G < 2 or problem.level_gap_deg <= 0:
         return jnp.zeros((0,), v.dtype)
-    lo, hi = _bounds(problem, v.dtype)
-    q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
+    q2 = _group_q2(problem, v)
     i, j = np.triu_indices(G, 1)
     return np.deg2rad(problem.level_gap_deg) - jnp.abs(q2[i] - q2[j])
 
@@ -251,6 +266,7 @@ def optimise_design(
     model: str | None = None,
     repeats: int = 1,
     level_gap_deg: float = 20.0,
+    q2_levels: str | tuple[float | None, ...] = "span",
     bound_pool: int = 2000,
 ) -> Design:
     """Optimise a design of `m` configurations (see module doc and `DesignProblem`).
@@ -279,6 +295,11 @@ def optimise_design(
     - `level_gap_deg`: with q2 groups, their q2 values at least this far apart (deg;
       default 20), so that the compensator can be recovered from the aggregated
       compliances; the bound and the random designs obey it too.
+    - `q2_levels`: with q2 groups, `"span"` (default) fixes the first group at the
+      lowest q2 of the box and the last at the highest, the others optimised (the
+      paper's rule, section 5.2: the levels' spread is what separates k2 from the
+      compensator in the two-step or nonlinear fit); `"free"` optimises all levels; or
+      one value per group (deg, `None` = optimised). The bound obeys the same levels.
     - `bound_pool`: candidates of the approximate-design bound (`design_bound`, with
       the design's own configurations added); 0 skips it.
 
@@ -304,12 +325,15 @@ def optimise_design(
         repeats=repeats,
         level_gap_deg=level_gap_deg,
     )
-    g = problem.group_index
+    problem = dataclasses.replace(problem, q2_levels_deg=resolve_levels(problem, q2_levels))
+    g, pins = problem.group_index, problem.q2_levels_deg
     random_best = None
     if init is not None:
         q0 = np.asarray(init, float).reshape(-1, m, 6)
     elif pool > 0:
-        cand = random_designs(robot, pool, m, seed, groups=g, level_gap_deg=problem.level_gap_deg)
+        cand = random_designs(
+            robot, pool, m, seed, groups=g, level_gap_deg=problem.level_gap_deg, q2_levels_deg=pins
+        )
         vals = np.asarray(pool_values(problem, jnp.asarray(cand)))
         random_best = float(np.nanmin(vals))
         q0 = cand[np.argsort(np.where(np.isfinite(vals), vals, np.inf))[:starts]]
@@ -328,6 +352,7 @@ def optimise_design(
             groups=g,
             margin=_MARGIN,
             level_gap_deg=problem.level_gap_deg + np.rad2deg(_GAP_MARGIN),
+            q2_levels_deg=pins,
         )
     z = _encode(problem, q0)
     history = []
@@ -393,6 +418,25 @@ def optimise_design(
     )
 
 
+def resolve_levels(
+    problem: DesignProblem, q2_levels: str | tuple[float | None, ...]
+) -> tuple[float | None, ...] | None:
+    """The fixed q2 levels (deg, `None` = optimised) of `q2_levels` (`"span"`, `"free"`
+    or one entry per group) for `problem`'s groups; `None` when nothing is fixed."""
+    G = problem.n_groups
+    if isinstance(q2_levels, str):
+        if q2_levels not in ("span", "free"):
+            raise ValueError(
+                f"q2_levels must be 'span', 'free' or one value per group, got {q2_levels!r}"
+            )
+        if q2_levels == "free" or G < 2:
+            return None
+        lo, hi = (float(np.degrees(np.asarray(b)[1])) for b in design_bounds(problem.robot))
+        return (lo, *([None] * (G - 2)), hi)
+    levels = tuple(None if v is None else float(v) for v in q2_levels)
+    return None if all(v is None for v in levels) else levels
+
+
 def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
     # One parameter holding most of the trace: the design spends itself on a parameter
     # it cannot determine (typically Kc in the physical set).
@@ -420,13 +464,15 @@ def rank_random_designs(
     seed: int = 0,
     groups: tuple[int, ...] | None = None,
     level_gap_deg: float = 20.0,
+    q2_levels: str | tuple[float | None, ...] = "free",
     **problem,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`n` random feasible designs of `m` configurations for a design problem (default:
-    the default problem, 3 q2 groups at least `level_gap_deg` apart), sorted by their
-    criterion, best first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further
-    `DesignProblem` settings (`parameters`, `criterion`, `model`, ...). The reference
-    designs a design is compared with (the best, the median)."""
+    the default problem, 3 q2 groups at least `level_gap_deg` apart, `q2_levels` as in
+    `optimise_design` but all random by default), sorted by their criterion, best
+    first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further `DesignProblem`
+    settings (`parameters`, `criterion`, `model`, ...). The reference designs a design
+    is compared with (the best, the median)."""
     _check_x64(robot)
     parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
     if listed is not None:
@@ -434,7 +480,10 @@ def rank_random_designs(
     P = DesignProblem(
         robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem
     )
-    q = random_designs(robot, n, m, seed, groups=P.group_index, level_gap_deg=level_gap_deg)
+    pins = resolve_levels(P, q2_levels)
+    q = random_designs(
+        robot, n, m, seed, groups=P.group_index, level_gap_deg=level_gap_deg, q2_levels_deg=pins
+    )
     v = np.asarray(pool_values(P, jnp.asarray(q)))
     order = np.argsort(np.where(np.isfinite(v), v, np.inf), kind="stable")
     return q[order], v[order]

@@ -127,11 +127,13 @@ def random_designs(
     groups: tuple[int, ...] | None = None,
     margin: float = 0.0,
     level_gap_deg: float = 0.0,
+    q2_levels_deg: tuple[float | None, ...] | None = None,
 ) -> np.ndarray:
     """`n` random feasible designs of `m` configurations, `(n, m, 6)` rad: uniform in
     the box, with (q2, q3) rejection-sampled on the wrist constraints (tightened by
     `margin` m). With `groups`, configurations of one group share their q2, and the
-    groups' q2 values are at least `level_gap_deg` apart (rejection-sampled)."""
+    groups' q2 values are at least `level_gap_deg` apart (rejection-sampled);
+    `q2_levels_deg` fixes some groups' q2 (deg, `None` = random)."""
     lo, hi = (np.asarray(b) for b in design_bounds(robot))
     if np.any(lo > hi):
         raise ValueError("the experiment ranges of q2/q3 lie outside the joint limits")
@@ -161,6 +163,8 @@ def random_designs(
             q2g = lo[1] + np.take_along_axis(u, np.argsort(rng.random((n, G)), axis=1), axis=1)
         else:
             q2g = lo[1] + (hi[1] - lo[1]) * rng.random((n, G))
+        if q2_levels_deg is not None:
+            q2g = _pin_levels(q2g, q2_levels_deg, lo[1], hi[1], gap, rng)
         q[:, :, 1] = q2g[:, g]
     flat = q.reshape(n * m, 6)
     for _ in range(200):
@@ -172,6 +176,22 @@ def random_designs(
         if groups is None:
             flat[bad, 1] = lo[1] + (hi[1] - lo[1]) * rng.random(bad.size)
     raise ValueError("could not sample feasible configurations: is the feasible region empty?")
+
+
+def _pin_levels(q2g, levels_deg, lo, hi, gap, rng) -> np.ndarray:
+    # Pinned groups set; the free ones redrawn uniformly until every gap holds.
+    pinned = np.array([v is not None for v in levels_deg])
+    q2g = q2g.copy()
+    q2g[:, pinned] = np.deg2rad([v for v in levels_deg if v is not None])
+    if gap <= 0 or pinned.all():
+        return q2g
+    for _ in range(1000):
+        bad = level_separation(q2g) < gap - 1e-12
+        if not bad.any():
+            return q2g
+        free = np.flatnonzero(~pinned)
+        q2g[np.ix_(bad, free)] = lo + (hi - lo) * rng.random((int(bad.sum()), free.size))
+    raise ValueError("cannot place the free q2 levels at the level gap from the fixed ones")
 
 
 def level_separation(q2g) -> np.ndarray:

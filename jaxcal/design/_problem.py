@@ -7,10 +7,11 @@ import math
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from .._robot import Robot
-from ._constraints import design_loads
+from ._constraints import design_bounds, design_loads
 from ._criteria import (
     CRITERIA,
     MODELS,
@@ -45,6 +46,11 @@ class DesignProblem(eqx.Module):
     - `level_gap_deg`: the groups' q2 values at least this far apart (deg), so that the
       compensator can be recovered from the aggregated joint-2 compliances (two-step
       or nonlinear fit); 0 lets levels merge.
+    - `q2_levels_deg`: per q2 group, a fixed q2 value (deg) or `None` (optimised); `None`
+      for all free. Pinning the lowest and highest group at the ends of the q2 range is
+      the paper's rule (section 5.2) for the compensator step: the spread of the levels
+      is what separates k2 from the compensator, and the aggregated trace (one
+      compliance per level) does not see it.
     """
 
     robot: Robot
@@ -60,6 +66,7 @@ class DesignProblem(eqx.Module):
     model: str | None = eqx.field(static=True, default=None)
     repeats: int = eqx.field(static=True, default=1)
     level_gap_deg: float = eqx.field(static=True, default=0.0)
+    q2_levels_deg: tuple[float | None, ...] | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         if self.m < 1:
@@ -84,6 +91,28 @@ class DesignProblem(eqx.Module):
                 )
         if self.groups is not None and len(self.groups) != self.m:
             raise ValueError(f"groups must have {self.m} entries, got {len(self.groups)}")
+        if self.q2_levels_deg is not None:
+            self._check_levels(self.q2_levels_deg)
+
+    def _check_levels(self, levels: tuple[float | None, ...]) -> None:
+        if self.group_index is None or len(levels) != self.n_groups:
+            raise ValueError(
+                f"q2_levels_deg must have one entry per q2 group ({self.n_groups}), got "
+                f"{len(levels)}"
+            )
+        fixed = sorted(v for v in levels if v is not None)
+        if self.robot.experiment is not None:
+            lo, hi = (math.degrees(float(b[1])) for b in design_bounds(self.robot))
+            for v in fixed:
+                if not lo - 1e-9 <= v <= hi + 1e-9:
+                    raise ValueError(
+                        f"q2_levels_deg: {v:g} deg is outside the q2 range [{lo:g}, {hi:g}]"
+                    )
+        if np.any(np.diff(fixed) < self.level_gap_deg - 1e-9):
+            raise ValueError(
+                f"q2_levels_deg: the fixed levels {fixed} are closer than level_gap_deg = "
+                f"{self.level_gap_deg:g}"
+            )
 
     @property
     def group_index(self) -> tuple[int, ...] | None:
