@@ -31,12 +31,25 @@ CASES = {
         dict(groups=tuple(i % 3 for i in range(12)), level_gap_deg=20.0),
         dict(groups=tuple(i % 3 for i in range(12)), level_gap_deg=20.0),
     ),
+    "default with --q2-levels free (all levels optimised)": (
+        ["--configs", "12", "--q2-levels", "free"],
+        dict(groups=tuple(i % 3 for i in range(12)), level_gap_deg=20.0),
+        dict(groups=tuple(i % 3 for i in range(12)), level_gap_deg=20.0),
+    ),
     "--model linear --parameters k2,k3,k4,k5,k6": (
         ["--configs", "12", "--model", "linear", "--parameters", "k2,k3,k4,k5,k6"],
         dict(parameters="physical", focus=("k2", "k3", "k4", "k5", "k6"), model="linear"),
         {},
     ),
 }
+
+
+def _k2_std(robot, q) -> float:
+    # The relative standard error of the physical k2 that the nonlinear fit (full model,
+    # Kc and s0 estimated) would reach: what the q2 levels' spread decides.
+    F = jaxcal.design_loads(robot, jnp.asarray(q))
+    c = jaxcal.design_criteria(robot, q, F, parameters="physical")
+    return float(np.asarray(c.relative_std)[list(c.names).index("k2_urad_per_Nm")])
 
 
 def main() -> None:
@@ -66,9 +79,22 @@ def main() -> None:
                 "-" if res["efficiency"] is None else f"{res['efficiency']:.3f}",
                 f"{res['value'] / v.min():.3f}",
                 f"{res['value'] / np.median(v):.3f}",
+                ", ".join(f"{x:g}" for x in np.round(res["q2_levels_deg"], 1))
+                if len(res["q2_levels_deg"]) < 12
+                else "free",
+                f"{_k2_std(robot, np.deg2rad(res['configs_deg'])):.4f}",
             ]
         )
-    heads = ["design", "wall s", "trace", "efficiency", "/ best random", "/ median random"]
+    heads = [
+        "design",
+        "wall s",
+        "trace",
+        "efficiency",
+        "/ best random",
+        "/ median random",
+        "q2 levels (deg)",
+        "predicted rel. std k2 (nonlinear fit)",
+    ]
     print("| " + " | ".join(heads) + " |")
     print("|" + "---|" * len(heads))
     for r in rows:

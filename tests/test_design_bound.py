@@ -223,3 +223,58 @@ def test_aggregated_bound_is_below_a_design_in_its_pool(robot, relative):
     assert b.levels_deg is not None and len(b.levels_deg) == 3
     assert np.diff(sorted(b.levels_deg)).min() >= 20.0 - 1e-6
     assert 0 < b.efficiency(float(v[0])) <= 1.0
+
+
+def test_fixed_q2_levels_in_designs_bound_and_random_starts(robot):
+    # `q2_levels`: the span rule pins the first group at the lowest q2 of the box and the
+    # last at the highest; the bound only takes level choices holding them, so it can
+    # only be higher than the bound over every choice; random designs obey the pins and
+    # the gap.
+    lo, hi = np.rad2deg(np.asarray(jaxcal.design_bounds(robot))[:, 1])
+    g = tuple(i % 3 for i in range(12))
+    free = DesignProblem(robot, 12, groups=g, model="linear", level_gap_deg=20.0)
+    span = DesignProblem(
+        robot, 12, groups=g, model="linear", level_gap_deg=20.0, q2_levels_deg=(lo, None, hi)
+    )
+    q = random_designs(
+        robot, 50, 12, seed=3, groups=g, level_gap_deg=20.0, q2_levels_deg=(lo, None, hi)
+    )
+    q2 = np.rad2deg(q[:, :3, 1])
+    assert np.allclose(q2[:, 0], lo) and np.allclose(q2[:, 2], hi)
+    assert np.all(np.abs(q2[:, 1] - lo) >= 20 - 1e-9) and np.all(np.abs(hi - q2[:, 1]) >= 20 - 1e-9)
+    b_free = design_bound(free, n=600)
+    b_span = design_bound(span, n=600)
+    assert min(b_span.levels_deg) == pytest.approx(lo) and max(b_span.levels_deg) == pytest.approx(
+        hi
+    )
+    assert b_span.value >= b_free.value * (1 - 1e-9)
+    d = jaxcal.optimise_design(
+        robot, 12, model="linear", starts=2, max_steps=40, bound_pool=0, seed=1
+    )
+    levels = np.unique(np.round(np.rad2deg(d.q[:, 1]), 9))
+    assert d.feasible and len(levels) == 3
+    assert levels[0] == pytest.approx(lo) and levels[-1] == pytest.approx(hi)
+
+
+@pytest.mark.parametrize(
+    "levels, match",
+    [
+        ((-30.0, 90.0), "one entry per q2 group"),
+        ((-30.0, None, 120.0), "outside the q2 range"),
+        ((-30.0, -20.0, None), "closer than level_gap_deg"),
+    ],
+)
+def test_bad_fixed_levels_are_named(robot, levels, match):
+    g = tuple(i % 3 for i in range(12))
+    with pytest.raises(ValueError, match=match):
+        DesignProblem(robot, 12, groups=g, level_gap_deg=20.0, q2_levels_deg=levels)
+
+
+def test_cli_q2_levels_option(capsys):
+    from jaxcal.internal import main
+
+    assert main(["design", "--q2-levels=-30,x,90"]) == 2
+    assert "--q2-levels" in capsys.readouterr().err
+    assert main(["design", "--q2-levels", "span,free"]) == 2
+    assert main(["design", "--model", "linear", "--q2-levels=-30,90"]) == 2
+    assert "one entry per q2 group" in capsys.readouterr().err

@@ -91,7 +91,7 @@ def register(sub) -> None:
         help="'span' (default: the first and last q2 level at the ends of the q2 range, "
         "the others optimised; the paper's rule, it separates k2 from the compensator), "
         "'free' (all optimised) or one value per group in deg, '-' for optimised, e.g. "
-        "-30,-,90",
+        "--q2-levels=-30,-,90",
     )
     p.add_argument(
         "--model",

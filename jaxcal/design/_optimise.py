@@ -431,7 +431,10 @@ def resolve_levels(
             )
         if q2_levels == "free" or G < 2:
             return None
-        lo, hi = (float(np.degrees(np.asarray(b)[1])) for b in design_bounds(problem.robot))
+        # Rounded: the box ends in deg are whole numbers up to the rad round trip.
+        lo, hi = (
+            round(float(np.degrees(np.asarray(b)[1])), 9) for b in design_bounds(problem.robot)
+        )
         return (lo, *([None] * (G - 2)), hi)
     levels = tuple(None if v is None else float(v) for v in q2_levels)
     return None if all(v is None for v in levels) else levels

@@ -27,6 +27,13 @@ from ._criteria import (
 __all__ = ["DesignProblem", "design_objective"]
 
 
+def _plain_levels(levels) -> tuple[float | None, ...] | None:
+    # Static metadata must be hashable Python values, not numpy scalars.
+    if levels is None:
+        return None
+    return tuple(None if v is None else float(v) for v in levels)
+
+
 class DesignProblem(eqx.Module):
     """A design problem (static settings + robot).
 
@@ -66,7 +73,9 @@ class DesignProblem(eqx.Module):
     model: str | None = eqx.field(static=True, default=None)
     repeats: int = eqx.field(static=True, default=1)
     level_gap_deg: float = eqx.field(static=True, default=0.0)
-    q2_levels_deg: tuple[float | None, ...] | None = eqx.field(static=True, default=None)
+    q2_levels_deg: tuple[float | None, ...] | None = eqx.field(
+        static=True, default=None, converter=lambda v: _plain_levels(v)
+    )
 
     def __check_init__(self):
         if self.m < 1:
