@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import os
 import pickle
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,8 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.core
+
+from ._io import atomic_file
 
 __all__ = ["export_directory", "exported", "set_export_directory"]
 
@@ -78,10 +78,8 @@ def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
 
 def _write(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".probe-")
-    with os.fdopen(fd, "wb") as f:
+    with atomic_file(path, binary=True) as f:
         f.write(data)
-    os.replace(tmp, path)
 
 
 def exported(fn: Callable, tag: str = "") -> Callable:

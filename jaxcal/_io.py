@@ -14,7 +14,7 @@ import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -27,7 +27,7 @@ __all__ = [
     "Dataset",
     "read_dataset",
     "write_dataset",
-    "atomic_text_file",
+    "atomic_file",
     "input_cells",
     "DataError",
     "configurations",
@@ -289,14 +289,14 @@ def read_dataset(
 
 
 @contextlib.contextmanager
-def atomic_text_file(path: str | Path) -> Iterator[TextIO]:
-    """Open `path` for writing text through a temporary file in the same directory,
-    renamed into place on success: a failure never leaves a half-written file, nor
-    clobbers an existing one."""
+def atomic_file(path: str | Path, *, binary: bool = False) -> Iterator[Any]:
+    """Open `path` for writing (text, or bytes with `binary`) through a temporary file in
+    the same directory, renamed into place on success: a failure never leaves a
+    half-written file, nor clobbers an existing one."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", newline="") as fh:
+        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="") as fh:
             yield fh
         os.replace(tmp, path)
     finally:
@@ -318,7 +318,7 @@ def write_dataset(
     path: str | Path | TextIO, data: Dataset, *, deflection: bool = True, sigma: bool = False
 ) -> None:
     """Write a data set as a data-format CSV (deg, N, N·m, mm) to a path (atomically:
-    see `atomic_text_file`) or an open text stream.
+    see `atomic_file`) or an open text stream.
 
     Deflection columns are written when `deflection` is true and the set has them (a
     design without deflections can be fed to `jaxcal simulate`); `sigma_mm` when `sigma`
@@ -336,7 +336,7 @@ def write_dataset(
     s = np.asarray(data.sigma) * 1e3
     with contextlib.ExitStack() as stack:
         if isinstance(path, str | Path):
-            fh: TextIO = stack.enter_context(atomic_text_file(path))
+            fh: TextIO = stack.enter_context(atomic_file(path))
         else:
             fh = path
         w = csv.writer(fh, lineterminator="\n")

@@ -5,14 +5,19 @@ bounds optimistix to the versions that pass these tests).
   `sol.state.aux` (no further evaluation of the model after the solve; `sol.aux` is
   the evaluation one step earlier, not at the returned point);
 - the stall check of jaxcal's Levenberg–Marquardt reads `state.y_eval`,
-  `state.num_steps_since_acceptance` and `state.first_step`.
+  `state.num_steps_since_acceptance` and `state.first_step`;
+- equinox: `RESULTS` (an `eqx.Enumeration`) lists its items in `_name_to_item`, in
+  declaration order; jaxcal's `NAMES` (the failure reasons counted per Monte-Carlo
+  chunk, and the order of `messages`) is pinned to it, so that a new item cannot be
+  forgotten.
 """
 
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from jaxcal.internal import levenberg_marquardt
+from jaxcal import RESULTS
+from jaxcal.internal import NAMES, levenberg_marquardt
 
 X = jnp.linspace(0.0, 1.0, 12)
 Y = 1.5 * jnp.exp(-0.7 * X) + 0.01 * jnp.sin(40 * X)  # not an exact fit: residuals stay
@@ -44,3 +49,8 @@ def test_state_fields_read_by_the_stall_check():
     for name in ("y_eval", "num_steps_since_acceptance", "first_step", "aux"):
         assert hasattr(state, name), name
     assert state.y_eval.shape == y0.shape
+
+
+def test_names_list_every_result_in_order():
+    assert NAMES == tuple(RESULTS._name_to_item)
+    assert NAMES[0] == "successful"

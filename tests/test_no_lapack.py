@@ -88,6 +88,7 @@ def test_monte_carlo_chunk_has_no_lapack(robot, design, method):
         jnp.asarray(tf.true, d0.dtype),
         jnp.zeros((n, 3), d0.dtype) if tf.force is None else jnp.asarray(tf.force),
         jnp.zeros((n, 3), d0.dtype) if tf.moment is None else jnp.asarray(tf.moment),
+        tf.inputs,  # the robot and angles, for a fit that takes them as arguments
     )
     text = fn.lower(*args).as_text()
     assert set(_LAPACK.findall(text)) == set()

@@ -19,7 +19,7 @@ from jaxtyping import Array, Float
 
 from .._batching import chunk_width, map_in_chunks
 from .._identification.calibration import Calibration
-from .._io import Dataset, atomic_text_file, input_cells, read_dataset
+from .._io import Dataset, atomic_file, input_cells, read_dataset
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
@@ -200,7 +200,7 @@ def write_commands(out: str | Path, comp: Compensation) -> int:
     cond = np.asarray(r.cond)
     std = np.asarray(r.res_std) * 1e3
     n = 0
-    with atomic_text_file(out) as fh:
+    with atomic_file(out) as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for i in np.flatnonzero(ok):

@@ -33,7 +33,7 @@ from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
 from .._model.simulate import batch_deflections as batch_deflections
 from .._robot import URAD as URAD, G as G
-from .._solution import messages as messages
+from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._path import compensate_rows as compensate_rows
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian

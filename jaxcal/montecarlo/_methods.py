@@ -10,6 +10,7 @@ trial.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -18,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import Dataset
+from .._io import Dataset, configurations
 from .._model.linear import joint_stiffness
 from .._parameters import get_parameters
 from .._robot import URAD, Robot
@@ -29,12 +30,18 @@ _AGG = re.compile(r"^k2@(-?[0-9.eE+-]+)deg_urad_per_Nm$")
 
 
 class TrialFit(NamedTuple):
-    """`fit(d, sigma, force, moment) -> (estimate, std, ci_lo, ci_hi, outcome)` for one
-    trial (deflections, σ, loads traced: one compiled study serves any load level);
-    `outcome` is a `RESULTS` item, or a success flag for methods that give no reason;
-    `names` and `true` values of the estimated parameters; the design's `force` and
-    `moment`; `unidentifiable()` names the parameters the design cannot determine
-    (called only when the noise-free fit fails)."""
+    """`fit(d, sigma, force, moment, *inputs) -> (estimate, std, ci_lo, ci_hi, outcome)`
+    for one trial (deflections, σ, loads traced: one compiled study serves any load
+    level); `outcome` is a `RESULTS` item, or a success flag for methods that give no
+    reason; `names` and `true` values of the estimated parameters; the design's `force`
+    and `moment`; `unidentifiable()` names the parameters the design cannot determine
+    (called only when the noise-free fit fails).
+
+    `inputs`: further traced arguments of `fit` (the robot and the design's angles, for
+    a fit that does not bake them in); `shared`: a hashable key when `fit` depends on
+    nothing else, so that studies of other designs of the same size (or another robot
+    of the same structure) reuse its compiled program; `None` for a fit closed over its
+    design."""
 
     names: tuple[str, ...]
     true: np.ndarray
@@ -42,6 +49,8 @@ class TrialFit(NamedTuple):
     unidentifiable: Callable[[], tuple[str, ...]] = lambda: ()
     force: np.ndarray | None = None
     moment: np.ndarray | None = None
+    inputs: tuple = ()
+    shared: tuple | None = None
 
 
 def null_space_names(
@@ -137,6 +146,15 @@ def trial_fit(
     # The names are static: abstract evaluation gets them without compiling anything.
     probe = jax.eval_shape(lambda d: base(robot, _data(d, design.sigma), **kw), clean)
     names = tuple(probe.names)
+    inputs, shared = (), None
+    if method == "nonlinear" and len(configurations(q)[0]) == len(q):
+        # The full model takes the robot and the angles as arguments: every design
+        # with as many distinct rows shares one compiled study. (Repeated rows keep
+        # the fit closed over the design, which solves each distinct unloaded
+        # equilibrium once.)
+        mask = tuple(bool(b) for b in np.asarray(ident.free_mask(robot, kw.get("free"))))
+        fit = _nonlinear_trial(mask, not no_moments)
+        inputs, shared = (robot, jnp.asarray(q)), ("nonlinear", mask, not no_moments)
     return TrialFit(
         names,
         true_values(robot, design, names),
@@ -144,4 +162,20 @@ def trial_fit(
         lambda: null_space_names(robot, design, names),
         f,
         m,
+        inputs,
+        shared,
     )
+
+
+@functools.cache
+def _nonlinear_trial(free: tuple[bool, ...], moments: bool) -> Callable:
+    # One function object per setting, so that jit's cache finds it again.
+    from .._identification.methods import fit_nonlinear
+
+    def fit(d, sigma, force, moment, robot, q):
+        if not moments:
+            # Host zeros: the model then leaves out the moment's generalised force.
+            moment = np.zeros(d.shape)
+        return _from_result(fit_nonlinear(robot, Dataset(q, force, moment, d, sigma), free=free))
+
+    return fit

@@ -187,6 +187,15 @@ def prepare_study(robot, design, method, free, clean, noise_std):
     return tf, d0, sigma, method
 
 
+# Compiled chunks of fits that take their design as arguments (`TrialFit.shared`).
+_SHARED: dict = {}
+
+
+def _shapes(args) -> tuple:
+    leaves = jax.tree.leaves(args)
+    return tuple((tuple(a.shape), str(a.dtype)) for a in leaves if hasattr(a, "shape"))
+
+
 def run_study(
     tf: TrialFit,
     d0: Float[Array, "n 3"],
@@ -221,8 +230,13 @@ def run_study(
     n = d0.shape[0]
     force = jnp.zeros((n, 3), d0.dtype) if tf.force is None else jnp.asarray(tf.force)
     moment = jnp.zeros((n, 3), d0.dtype) if tf.moment is None else jnp.asarray(tf.moment)
-    args0 = (key, jnp.int64(0), jnp.int64(trials), d0, sigma, true, force, moment)
+    args0 = (key, jnp.int64(0), jnp.int64(trials), d0, sigma, true, force, moment, tf.inputs)
     ckey = (chunk, tuple(d.id for d in devices), student_t, keep_estimates, histogram_bins)
+    if tf.shared is not None:
+        # A fit that takes the design as arguments: one program per size, kept for
+        # every later study (the key holds the argument structure, shapes included).
+        cache = _SHARED
+        ckey = (tf.shared, *ckey, jax.tree.structure(args0), *_shapes(args0))
     t0 = time.perf_counter()
     if ckey not in cache:
         fn = _make_chunk_fn(tf.fit, chunk, mesh, student_t, keep_estimates, histogram_bins)
