@@ -25,7 +25,7 @@ import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._linalg.dense import SmallCholesky, SmallQR, eigvalsh
+from .._linalg.dense import SmallCholesky, SmallQR, well_conditioned
 from .._solution import RESULTS, result_of
 
 __all__ = [
@@ -41,10 +41,6 @@ __all__ = [
     "linear_solve_factored",
 ]
 
-#: Relative eigenvalue floor of the Jacobi-scaled normal matrix below which a fit is
-#: called rank deficient (float64 round-off of JᵀJ is ~1e-16 relative; 1e-12 leaves a
-#: margin of four decades while still flagging exact or near-exact collinearity).
-RCOND = 1e-12
 _JAC = "fwd"
 
 
@@ -131,8 +127,7 @@ def covariance_from_jacobian(
     Ns = N / (d[:, None] * d[None, :])
     Ns = 0.5 * (Ns + Ns.T)
     Ns = jnp.where(jnp.isfinite(Ns), Ns, 0.0)
-    lam = eigvalsh(jax.lax.stop_gradient(Ns))
-    well = ok_d & (lam[0] > RCOND * lam[-1])
+    well = ok_d & well_conditioned(Ns)
     # Solve on a safe matrix (identity when ill posed) so Cholesky never sees a
     # singular matrix; the result is then replaced by NaN.
     q = N.shape[0]

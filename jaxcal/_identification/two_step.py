@@ -28,13 +28,13 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._io import Dataset, q2_groups
-from .._linalg.dense import cho_solve, cholesky, eigvalsh
+from .._linalg.dense import cho_solve, cholesky, well_conditioned
 from .._model.compensator import eta_terms
 from .._model.observation import observation_linear
 from .._parameters import get_parameters
 from .._robot import URAD, Robot
 from .._solution import RESULTS, result_of
-from .lsq import RCOND, LinearFactor, linear_factor, linear_solve_factored
+from .lsq import LinearFactor, linear_factor, linear_solve_factored
 from .result import IdentificationResult, free_mask, make_result
 
 __all__ = ["TwoStepSystem", "two_step_system", "solve_two_step", "fit_two_step", "step2_row"]
@@ -149,8 +149,7 @@ def solve_two_step(system: TwoStepSystem, deflection: Float[Array, "n 3"]) -> Id
     G = jax.jacfwd(lambda t: _step2(system, t, cov1)[0])(theta1)
     cov = G @ cov1 @ G.T
     cov = 0.5 * (cov + cov.T)
-    lam = eigvalsh(jnp.where(jnp.isfinite(N), N, 0.0))
-    well2 = lam[0] > RCOND * lam[-1]
+    well2 = well_conditioned(N)
     # Residuals of the linear model at the final parameters (compensator aggregated, eq. 10).
     k = params[:6]
     Kc, s0 = params[6], params[7]
