@@ -91,9 +91,13 @@ class LsqFit(eqx.Module):
     covariance: Float[Array, "P P"]
     residuals: Float[Array, "n 3"]
     chi2: Float[Array, ""]
-    converged: Bool[Array, ""]
     steps: Int[Array, ""]
     result: RESULTS
+
+    @property
+    def converged(self) -> Bool[Array, ""]:
+        """`result == RESULTS.successful`."""
+        return self.result == RESULTS.successful
 
 
 def huber_transform(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
@@ -291,7 +295,6 @@ def nonlinear_fit(
     cov = jnp.zeros((P, P), p0.dtype).at[idx[:, None], idx[None, :]].set(cov_free)
     finite = jnp.all(jnp.isfinite(res)) & jnp.all(jnp.isfinite(p))
     solved = sol.result == optx.RESULTS.successful
-    converged = solved & ok & finite & well
     result = result_of(
         (ok, RESULTS.equilibrium_failed),
         (finite, RESULTS.nonfinite),
@@ -303,7 +306,6 @@ def nonlinear_fit(
         covariance=cov,
         residuals=res,
         chi2=jnp.sum(r**2),
-        converged=converged,
         steps=sol.stats["num_steps"],
         result=result,
     )

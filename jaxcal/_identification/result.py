@@ -35,7 +35,8 @@ class IdentificationResult(eqx.Module):
     - `residuals` `(n, 3)`: measured − model deflection, m, base frame.
     - `standardized` `(n, 3)`: residuals / σ of the row.
     - `rms` (m) over all coordinates; `chi2_red` = Σ standardized² / `dof`.
-    - `converged`: solver success, finite model, well-posed design.
+    - `result`: `RESULTS.successful`, or why the fit failed (`converged` is the same
+      as a flag: solver success, finite model, well-posed design).
     - `steps`: solver steps (0 for the closed-form methods).
     - `fixed_values` `(k,)`: values of the parameters held fixed, user units.
 
@@ -53,7 +54,6 @@ class IdentificationResult(eqx.Module):
     standardized: Float[Array, "n 3"]
     rms: Float[Array, ""]
     chi2_red: Float[Array, ""]
-    converged: Bool[Array, ""]
     steps: Int[Array, ""]
     fixed_values: Float[Array, " k"]
     result: RESULTS
@@ -63,6 +63,11 @@ class IdentificationResult(eqx.Module):
     fixed: tuple[str, ...] = eqx.field(static=True, default=())
     gross_rows: tuple[int, ...] = eqx.field(static=True, default=())
     gross_excluded: bool = eqx.field(static=True, default=False)
+
+    @property
+    def converged(self) -> Bool[Array, ""]:
+        """`result == RESULTS.successful` (batched under `vmap`)."""
+        return self.result == RESULTS.successful
 
     # ----- host-side reporting (not traceable; for one unbatched result) -----
 
@@ -247,7 +252,6 @@ def make_result(
         standardized=z,
         rms=jnp.sqrt(jnp.mean(residuals**2)),
         chi2_red=jnp.sum(z**2) / max(dof, 1),
-        converged=jnp.asarray(converged),
         steps=jnp.asarray(steps),
         fixed_values=estimate_all[fidx],
         result=result,
