@@ -122,6 +122,24 @@ class _Evaluation(NamedTuple):
     steps: np.ndarray
 
 
+class _Model(NamedTuple):
+    # What every fit of a call shares: the robot, the design's rows (`with_unloaded`
+    # layout) and the parameters' scales.
+    robot: Robot
+    design: tuple
+    scale: Array
+
+
+class _Trial(NamedTuple):
+    # One fit's own inputs (batched): start, slot indices, free mask, target
+    # deflections (m) and σ (m).
+    p0: Array
+    sel: Array
+    mask: Array
+    target: Array
+    sigma: Array
+
+
 class SuperModel:
     """The nominal robot plus `candidates`, with a flat parameter vector in user units:
     `k1..k6` (µrad/(N·m)), then `Kc` (N/m) and `Kc·s0` (N) if the robot has a compensator
@@ -204,13 +222,15 @@ class SuperModel:
             _COMPILED[self._key] = exported(eqx.filter_jit(self._batched), tag=repr(self._key))
         return _COMPILED[self._key]
 
-    def _one(self, robot, design, scale, p0, sel, mask, target, sigma, fit, max_steps):
+    def _one(self, model: _Model, trial: _Trial, fit, max_steps):
         """One fit (or, with `fit` False, one evaluation) of u = (nominal parameters,
-        the `SLOTS` parameters at indices `sel`), `mask` marking which move.
+        the `SLOTS` parameters at indices `trial.sel`), `trial.mask` marking which move.
 
         Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), solved, valid, steps)`;
         `Jw` is the σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the
         result."""
+        robot, design, scale = model
+        p0, sel, mask, target, sigma = trial
         nn = self.n_nominal
         sc = jnp.concatenate([scale[:nn], scale[sel]])
 
@@ -270,17 +290,15 @@ class SuperModel:
         valid = jnp.all(ok) & jnp.all(jnp.isfinite(r))
         return embed(u, mask), res, jnp.sum(r**2), Jw, solved, valid, steps
 
-    def _batched(self, robot, design, scale, P0, SEL, MASK, T, S, fit, max_steps):
-        return jax.vmap(
-            lambda p, s_, m, t, s: self._one(robot, design, scale, p, s_, m, t, s, fit, max_steps)
-        )(P0, SEL, MASK, T, S)
+    def _batched(self, model: _Model, trials: _Trial, fit, max_steps):
+        return jax.vmap(lambda t: self._one(model, t, fit, max_steps))(trials)
 
     def _call(self, start, sel, mask, target, sigma, fit: bool):
         fn = self._compiled()
-        scale = jnp.asarray(self.scale)
+        model = _Model(self.robot, self.design, jnp.asarray(self.scale))
         out = map_in_chunks(
             lambda P0, SEL, M, T, S: fn(
-                self.robot, self.design, scale, P0, SEL, M, T, S, jnp.asarray(fit), STEPS_PER_CALL
+                model, _Trial(P0, SEL, M, T, S), jnp.asarray(fit), STEPS_PER_CALL
             ),
             start.shape[0],
             chunk_size(),

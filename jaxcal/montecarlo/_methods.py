@@ -176,6 +176,7 @@ def _nonlinear_trial(free: tuple[bool, ...], moments: bool) -> Callable:
         if not moments:
             # Host zeros: the model then leaves out the moment's generalised force.
             moment = np.zeros(d.shape)
-        return _from_result(fit_nonlinear(robot, Dataset(q, force, moment, d, sigma), free=free))
+        data = Dataset(q, force, moment, d, sigma)  # type: ignore[arg-type]
+        return _from_result(fit_nonlinear(robot, data, free=free))
 
     return fit
