@@ -122,9 +122,11 @@ def _rmse_ratio(a, b):
 
 @pytest.mark.slow
 def test_default_design_proven_by_repeated_experiments(robot, default_design):
-    # Issue 15, item 3: 1000 simulated experiments per design, nonlinear fit on the full
+    # Issue 15, item 3: simulated experiments per design, nonlinear fit on the full
     # model (k1 held: vertical loads), sigma = 0.02 mm. Tolerance: 3 standard errors of
-    # the log RMSE ratio (about 0.03 for 1000 trials).
+    # the log RMSE ratio, about 0.022 with 2000 trials: the smallest gain the linearised
+    # covariance predicts (k4 against the median random design, 0.91 on the optimiser's
+    # neighbouring local optima) is then resolved; with 1000 trials it is borderline.
     q_def = np.deg2rad(np.asarray(default_design["configs_deg"]))
     q_rand, _ = jaxcal.rank_random_designs(robot, 200, seed=0)
     free = [n for n in robot.parameter_names if n != "k1_urad_per_Nm"]
@@ -137,9 +139,13 @@ def test_default_design_proven_by_repeated_experiments(robot, default_design):
         F = np.asarray(jaxcal.design_loads(robot, jnp.asarray(q)))
         ds = jaxcal.Dataset.from_arrays(np.rad2deg(q), F, sigma_mm=0.02)
         mc[label] = jaxcal.monte_carlo(
-            robot, ds, trials=1000, method="nonlinear", free=free, seed=7, keep_estimates=True
+            robot, ds, trials=2000, method="nonlinear", free=free, seed=7, keep_estimates=True
         )
         assert mc[label].failed == 0, label
+    # The nonlinear study takes the design as arguments: one compiled program serves
+    # every design of the same size.
+    assert mc["table5"].compile_seconds < 0.05 * mc["default"].compile_seconds
+    assert mc["median"].compile_seconds < 0.05 * mc["default"].compile_seconds
     names = [n.split("_")[0] for n in mc["default"].names]
     for other in ("table5", "median"):
         lr, se = _rmse_ratio(mc["default"], mc[other])
@@ -147,7 +153,7 @@ def test_default_design_proven_by_repeated_experiments(robot, default_design):
         for j, n in enumerate(names):
             if other == "table5" and n in ("k2", "k3", "k4", "k5", "k6"):
                 # No worse than the paper's plan for every compliance (k2: the
-                # linearised covariance predicts 1.04, unresolved by 1000 trials).
+                # linearised covariance predicts 1.04, inside the tolerance).
                 assert lr[j] <= 3 * se[j], (other, n)
             if other == "median" and n in ("k2", "k4", "k5", "k6"):
                 # Better than the median random design (significantly).
