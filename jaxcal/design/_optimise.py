@@ -258,7 +258,7 @@ def optimise_design(
     focus: tuple[str, ...] | None = None,
     starts: int = 8,
     seed: int = 0,
-    max_steps: int = 150,
+    max_steps: int = 300,
     rtol: float = 1e-8,
     init: np.ndarray | None = None,
     pool: int = 0,
