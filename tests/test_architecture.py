@@ -2,8 +2,8 @@
 
 - no import cycle between jaxcal's modules (imports inside functions count too);
 - no module imports another module's underscore name;
-- nothing but the command line (`_cli/`) and the test namespace (`internal/`) imports
-  the command line;
+- nothing but the command line (`_cli/`) and its test door (`internal/cli.py`) imports
+  the command line, and importing `jaxcal` or `jaxcal.internal` does not load it;
 - tests, benchmarks and notebooks use only public names and `jaxcal.internal`.
 """
 
@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import ast
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -89,7 +91,7 @@ def test_no_underscore_name_imported_from_another_module():
 
 
 def test_library_never_imports_the_cli():
-    allowed = ("jaxcal._cli", "jaxcal.internal")
+    allowed = ("jaxcal._cli", "jaxcal.internal.cli")
     bad = [
         f"{m} imports {src}"
         for m in MODULES
@@ -98,6 +100,17 @@ def test_library_never_imports_the_cli():
         if src == "jaxcal._cli" or src.startswith("jaxcal._cli.")
     ]
     assert not bad, "\n".join(bad)
+
+
+def test_importing_the_library_does_not_load_the_cli():
+    code = (
+        "import sys, jaxcal, jaxcal.internal; "
+        "print(sorted(m for m in sys.modules if m.startswith('jaxcal._cli')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]"
 
 
 def _external_sources():

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal.internal import main, make_result
+from jaxcal.internal import make_result
+from jaxcal.internal.cli import main
 
 EXAMPLE = "example_calibration.csv"
 

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 import jaxcal
-from jaxcal.internal import cache_info, clear_cache, main
+from jaxcal.internal import cache_info, clear_cache
+from jaxcal.internal.cli import main
 
 
 def test_cache_dir_resolution(monkeypatch, tmp_path):

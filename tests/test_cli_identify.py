@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from jaxcal.internal import main
+from jaxcal.internal.cli import main
 
 
 def test_identify_json(data_dir, capsys):
@@ -102,7 +102,7 @@ def test_demo_json(capsys):
 
 @pytest.mark.parametrize("command", ["identify", "montecarlo"])
 def test_fix_is_repeatable_and_comma_separated_in_every_command(command):
-    from jaxcal.internal import build_parser, fix_names
+    from jaxcal.internal.cli import build_parser, fix_names
 
     args = build_parser().parse_args([command, "x.csv", "--fix", "k1, s0", "--fix", "Kc"])
     assert fix_names(args.fix) == ["k1", "s0", "Kc"]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal import internal
+from jaxcal.internal import cli
 
 REF = "reference_deflections.csv"
 
@@ -27,7 +27,7 @@ def _read(path, robot):
 def clean(tmp_path_factory, data_dir, robot):
     """Noise-free simulation of the reference file's configurations and loads."""
     out = tmp_path_factory.mktemp("sim") / "clean.csv"
-    assert internal.main(["simulate", str(data_dir / REF), "-o", str(out)]) == 0
+    assert cli.main(["simulate", str(data_dir / REF), "-o", str(out)]) == 0
     return out, _read(out, robot)
 
 
@@ -87,7 +87,7 @@ def test_input_without_deflection_columns(tmp_path, clean, data_dir, robot, caps
     design = tmp_path / "design.csv"
     jaxcal.write_dataset(design, ref, deflection=False)
     assert "dx_mm" not in design.read_text().splitlines()[0]
-    assert internal.main(["simulate", str(design)]) == 0
+    assert cli.main(["simulate", str(design)]) == 0
     captured = capsys.readouterr()
     out = tmp_path / "out.csv"
     out.write_text(captured.out)
@@ -103,7 +103,7 @@ def test_robot_file_option(tmp_path, data_dir, robot):
     rf = tmp_path / "stiff.json"
     rf.write_text(json.dumps(d))
     out = tmp_path / "stiff.csv"
-    assert internal.main(["simulate", str(data_dir / REF), "--robot", str(rf), "-o", str(out)]) == 0
+    assert cli.main(["simulate", str(data_dir / REF), "--robot", str(rf), "-o", str(out)]) == 0
     stiff = _read(out, robot)
     ref = _read(data_dir / REF, robot)
     assert stiff.deflection is not None and ref.deflection is not None
@@ -122,7 +122,7 @@ def test_noise_reproducible_with_roughly_the_right_std(tmp_path, clean, data_dir
     for seed, name in ((7, "a.csv"), (7, "b.csv"), (8, "c.csv")):
         out = tmp_path / name
         args = ["simulate", str(data_dir / REF), "--noise-mm", str(sigma_mm), "--seed", str(seed)]
-        assert internal.main([*args, "-o", str(out)]) == 0
+        assert cli.main([*args, "-o", str(out)]) == 0
         outs.append(out)
     assert outs[0].read_text() == outs[1].read_text()  # same seed, same file
     assert outs[0].read_text() != outs[2].read_text()
@@ -144,28 +144,28 @@ def test_noise_reproducible_with_roughly_the_right_std(tmp_path, clean, data_dir
     assert abs(d.std(ddof=1) / (sigma_mm * np.sqrt(2)) - 1) < 4 / np.sqrt(2 * (n - 1))
     # --noise-mm 0 is noise-free.
     zero = tmp_path / "z.csv"
-    assert internal.main(["simulate", str(data_dir / REF), "--noise-mm", "0", "-o", str(zero)]) == 0
+    assert cli.main(["simulate", str(data_dir / REF), "--noise-mm", "0", "-o", str(zero)]) == 0
     z = _read(zero, robot)
     assert z.deflection is not None
     np.testing.assert_array_equal(np.asarray(z.deflection), np.asarray(sim0.deflection))
 
 
 def _subparser(name: str) -> argparse.ArgumentParser:
-    parser = internal.build_parser()
+    parser = cli.build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return sub.choices[name]
 
 
 def test_help_lists_everything(capsys):
     with pytest.raises(SystemExit) as e:
-        internal.main(["--help"])
+        cli.main(["--help"])
     assert e.value.code == 0
     top = capsys.readouterr().out
-    for name in internal.COMMANDS:
+    for name in cli.COMMANDS:
         assert name in top
     assert "usage: jaxcal" in top
     with pytest.raises(SystemExit) as e:
-        internal.main(["simulate", "--help"])
+        cli.main(["simulate", "--help"])
     assert e.value.code == 0
     text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
     p = _subparser("simulate")
@@ -189,7 +189,7 @@ def test_bad_data_file_exit_code_2_names_row_and_column(tmp_path, data_dir, caps
     lines[6] = ",".join(cells)
     bad = tmp_path / "bad.csv"
     bad.write_text("\n".join(lines) + "\n")
-    assert internal.main(["simulate", str(bad)]) == 2
+    assert cli.main(["simulate", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("jaxcal simulate: error:")
     assert f"{bad}, row 3 (line 4), column fy_N: 'oops' is not a finite number" in err
@@ -204,17 +204,17 @@ def test_bad_data_file_exit_code_2_names_row_and_column(tmp_path, data_dir, caps
     ],
 )
 def test_bad_options_exit_code_2(data_dir, capsys, args, says):
-    assert internal.main(["simulate", str(data_dir / REF), *args]) == 2
+    assert cli.main(["simulate", str(data_dir / REF), *args]) == 2
     assert says in capsys.readouterr().err
 
 
 def test_missing_file_exit_code_2(tmp_path, capsys):
-    assert internal.main(["simulate", str(tmp_path / "nope.csv")]) == 2
+    assert cli.main(["simulate", str(tmp_path / "nope.csv")]) == 2
     assert "cannot read" in capsys.readouterr().err
 
 
 def test_usage_errors_exit_code_2(capsys):
     with pytest.raises(SystemExit) as e:
-        internal.main(["simulate"])
+        cli.main(["simulate"])
     assert e.value.code == 2
     assert "DATA.csv" in capsys.readouterr().err

@@ -17,7 +17,7 @@ from scipy import stats
 
 import jaxcal
 from jaxcal.compensation import compensate, compensate_row, read_path
-from jaxcal.internal import main
+from jaxcal.internal.cli import main
 
 #: Process wrench of the tests: 3 kN force and a moment, base frame (N, N·m).
 FORCE = (800.0, 2800.0, -600.0)

@@ -322,7 +322,7 @@ def test_aggregated_design_at_most_half_of_random(robot):
 
 
 def test_cli_design_and_evaluate(tmp_path, capsys):
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     out = tmp_path / "design.csv"
     rc = main(

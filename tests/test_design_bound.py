@@ -76,7 +76,7 @@ def default_design():
     # `jaxcal design --configs 12 --json`: aggregated set, trace, full model, 3 q2 levels
     # at least 20° apart, the lowest and highest at the ends of the q2 range, vertical
     # loads. Run once for the tests below.
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
@@ -164,7 +164,7 @@ def test_default_design_proven_by_repeated_experiments(robot, default_design):
 
 
 def test_repeats_divide_the_covariance_and_fill_the_design_file(robot, tmp_path, capsys):
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     q = random_designs(robot, 1, 4, seed=5, groups=(0, 1, 2, 0))[0]
     F = np.tile([0.0, 0.0, -robot.experiment.max_load], (12, 1))
@@ -189,7 +189,7 @@ def test_explicit_list_on_the_linear_model_beats_random(robot, capsys):
     # `jaxcal design --configs 12 --model linear --parameters k2,k3,k4,k5,k6`: the
     # criterion is the marginal trace of those five (Kc, s0 still estimated);
     # benchmarks/README.md has its wall time.
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     rc = main(
         ["design", "--configs", "12", "--model", "linear", "--parameters", "k2,k3,k4,k5,k6"]
@@ -277,7 +277,7 @@ def test_bad_fixed_levels_are_named(robot, levels, match):
 
 
 def test_cli_q2_levels_option(capsys):
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     assert main(["design", "--q2-levels=-30,x,90"]) == 2
     assert "--q2-levels" in capsys.readouterr().err

@@ -222,7 +222,7 @@ def test_gap_is_detected_before(study):
 
 def test_cli_discover_example_answers_none(data_dir, capsys, study):
     # (after the study: the compiled model is reused)
-    from jaxcal.internal import main
+    from jaxcal.internal.cli import main
 
     rc = main(["discover", str(data_dir / "example_calibration.csv"), "--json"])
     out = json.loads(capsys.readouterr().out)

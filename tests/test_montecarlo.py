@@ -24,7 +24,8 @@ from hypothesis import given, settings, strategies as st
 
 import jaxcal
 from jaxcal import monte_carlo, trial_noise
-from jaxcal.internal import MomentAccumulator, TrialFit, main, run_study
+from jaxcal.internal import MomentAccumulator, TrialFit, run_study
+from jaxcal.internal.cli import main
 
 SIGMA = 2e-5  # m, the canonical tracker noise (0.02 mm)
 ROOT = Path(__file__).resolve().parents[1]

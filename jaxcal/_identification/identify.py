@@ -21,6 +21,7 @@ import numpy as np
 
 from .._exported import exported
 from .._io import Dataset, configurations, q2_groups
+from .._linalg.covariance import null_space, nullity
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
@@ -46,12 +47,6 @@ __all__ = [
 
 METHODS = ("linear", "two-step", "nonlinear")
 
-#: A column whose norm is below this fraction of the largest has no sensitivity.
-_NO_SENSITIVITY = 1e-9
-#: Singular values of the column-normalised design below this are null directions.
-#: Exact rank deficiency gives ~1e-15 in float64; a genuine but weak design (k1 from a
-#: few horizontal loads, compensator from three close q2 values) stays above ~1e-4.
-_NULL = 1e-7
 #: Order in which parameters are proposed for fixing (last-resort ones first).
 _FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
 
@@ -123,29 +118,14 @@ def design_matrix(robot: Robot, data: Dataset, method: str) -> tuple[np.ndarray,
 
 
 def identifiability(X: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[str]]:
-    """Parameters the design `X` (columns ↔ `names`) cannot determine, and a minimal set
-    to fix (preferring compensator parameters and k1). Host-side, SVD-based."""
-    norms = np.linalg.norm(X, axis=0)
-    dead = norms <= _NO_SENSITIVITY * max(norms.max(), 1e-300)
-    bad = set(np.flatnonzero(dead).tolist())
-    live = np.flatnonzero(~dead)
-
-    def nullity(cols):
-        if len(cols) == 0:
-            return 0
-        Xn = X[:, cols] / norms[cols]
-        s = np.linalg.svd(Xn, compute_uv=False)
-        return int(np.sum(s < _NULL * max(s[0], 1e-300)))
-
-    if len(live):
-        Xn = X[:, live] / norms[live]
-        _, s, Vt = np.linalg.svd(Xn, full_matrices=False)
-        null = Vt[s < _NULL * s[0]]
-        if len(null):
-            weight = np.linalg.norm(null, axis=0)
-            bad |= {int(live[i]) for i in np.flatnonzero(weight > 1e-3)}
+    """Parameters the design `X` (columns ↔ `names`) cannot determine
+    (`_linalg.covariance.null_space`), and a minimal set to fix (preferring compensator
+    parameters and k1). Host-side."""
+    bad_mask = null_space(X)
+    bad = set(np.flatnonzero(bad_mask).tolist())
+    dead = ~(np.linalg.norm(X, axis=0) > 0)
     fix = sorted(int(i) for i in np.flatnonzero(dead))
-    cols = [int(i) for i in live]
+    cols = [i for i in range(X.shape[1]) if not dead[i]]
     order = sorted(
         [i for i in cols if i in bad],
         key=lambda i: (
@@ -155,10 +135,10 @@ def identifiability(X: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], l
         ),
     )
     for i in order:
-        if nullity(cols) == 0:
+        if nullity(X[:, cols]) == 0:
             break
         trial = [c for c in cols if c != i]
-        if nullity(trial) < nullity(cols):
+        if nullity(X[:, trial]) < nullity(X[:, cols]):
             cols = trial
             fix.append(i)
     return [names[i] for i in sorted(bad)], [names[i] for i in sorted(fix)]

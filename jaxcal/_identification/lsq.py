@@ -21,11 +21,11 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._linalg.dense import SmallCholesky, SmallQR, well_conditioned
+from .._linalg.covariance import covariance_from_jacobian
+from .._linalg.dense import SmallQR
 from .._solution import RESULTS, result_of
 
 __all__ = [
@@ -34,8 +34,6 @@ __all__ = [
     "nonlinear_fit",
     "huber_transform",
     "huber_weights",
-    "covariance_from_jacobian",
-    "masked_covariance",
     "LinearFactor",
     "linear_factor",
     "linear_solve_factored",
@@ -112,47 +110,6 @@ def huber_transform(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
 def huber_weights(r: Float[Array, " m"], delta: float) -> Float[Array, " m"]:
     """IRLS weights `ψ(r)/r = min(1, delta/|r|)` of the Huber loss."""
     return jnp.minimum(1.0, delta / jnp.maximum(jnp.abs(r), 1e-300))
-
-
-def covariance_from_jacobian(
-    J: Float[Array, "m q"], w: Float[Array, " m"] | None = None
-) -> tuple[Float[Array, "q q"], Bool[Array, ""]]:
-    """`(Jᵀ diag(w) J)⁻¹` for a σ-weighted Jacobian `J`, and whether it is well posed.
-
-    The normal matrix is Jacobi-scaled (unit diagonal) before the rank test and the
-    Cholesky solve, so the test measures collinearity, not units. Never inverts a
-    singular matrix: ill-posed → `(NaN matrix, False)`.
-    """
-    Jw = J if w is None else J * jnp.sqrt(w)[:, None]
-    N = Jw.T @ Jw
-    d = jnp.sqrt(jnp.diag(N))
-    ok_d = jnp.all(d > 0) & jnp.all(jnp.isfinite(N))
-    d = jnp.where(d > 0, d, 1.0)
-    Ns = N / (d[:, None] * d[None, :])
-    Ns = 0.5 * (Ns + Ns.T)
-    Ns = jnp.where(jnp.isfinite(Ns), Ns, 0.0)
-    well = ok_d & well_conditioned(Ns)
-    # Solve on a safe matrix (identity when ill posed) so Cholesky never sees a
-    # singular matrix; the result is then replaced by NaN.
-    q = N.shape[0]
-    eye = jnp.eye(q, dtype=N.dtype)
-    op = lx.MatrixLinearOperator(jnp.where(well, Ns, eye), lx.positive_semidefinite_tag)
-    X = jax.vmap(
-        lambda b: lx.linear_solve(op, b, SmallCholesky(), throw=False).value, in_axes=1, out_axes=1
-    )(eye)
-    cov = X / (d[:, None] * d[None, :])
-    cov = 0.5 * (cov + cov.T)
-    return jnp.where(well, cov, jnp.nan), well
-
-
-def masked_covariance(
-    J: Float[Array, "m q"], mask: Float[Array, " q"]
-) -> tuple[Float[Array, "q q"], Bool[Array, ""]]:
-    """`covariance_from_jacobian` over the columns of `J` where `mask` is 1 (the others
-    get a unit row of their own, so their block is the identity and the fitted block is
-    exact): one shape serves fits that free different parameters."""
-    m = mask.astype(J.dtype)
-    return covariance_from_jacobian(jnp.concatenate([J * m[None, :], jnp.diag(1.0 - m)]))
 
 
 def _split(out):

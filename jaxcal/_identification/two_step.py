@@ -28,7 +28,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._io import Dataset, q2_groups
-from .._linalg.dense import cho_solve, cholesky, well_conditioned
+from .._linalg.covariance import well_conditioned
+from .._linalg.dense import cho_solve, cholesky
 from .._model.compensator import eta_terms
 from .._model.observation import observation_linear
 from .._parameters import get_parameters

@@ -37,8 +37,6 @@ __all__ = [
     "lu_solve",
     "lstsq_qr",
     "eigvalsh",
-    "well_conditioned",
-    "RCOND",
     "SmallLU",
     "SmallCholesky",
     "SmallQR",
@@ -189,21 +187,6 @@ def eigvalsh(A: Float[Array, "n n"], sweeps: int = 12) -> Float[Array, " n"]:
 
 
 # --- lineax solvers -----------------------------------------------------------------
-
-
-#: Relative eigenvalue floor of a Jacobi-scaled normal matrix below which a fit is
-#: called rank deficient (float64 round-off of JᵀJ is ~1e-16 relative; 1e-12 leaves a
-#: margin of four decades while still flagging exact or near-exact collinearity).
-RCOND = 1e-12
-
-
-def well_conditioned(N: Float[Array, "n n"]) -> Bool[Array, ""]:
-    """The rank test of every fit: the smallest eigenvalue of the (Jacobi-scaled,
-    symmetric) normal matrix `N` above `RCOND` times the largest. Non-finite entries
-    count as zero; no gradient flows through the test."""
-    N = jnp.where(jnp.isfinite(N), N, 0.0)
-    lam = eigvalsh(jax.lax.stop_gradient(N))
-    return lam[0] > RCOND * lam[-1]
 
 
 def _ravel(tree: PyTree[Array]) -> Array:

@@ -41,6 +41,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._exported import exported
 from .._io import q2_groups
+from .._linalg.covariance import unidentifiable, well_conditioned
 from .._linalg.dense import cholesky, solve_lower
 from .._robot import Robot
 from .._solution import RESULTS, result_of
@@ -129,13 +130,10 @@ def _scaled_information(obs, nominal, sigma):
 
 
 def _factor(M) -> tuple[Float[Array, "p p"], Bool[Array, ""]]:
+    # The rank test of every fit (`well_conditioned`) on the information matrix; the
+    # Cholesky factor for the (differentiable) covariance and log-determinant.
     L = cholesky(M)
-    d = jnp.diagonal(L)
-    # Positive definite to working precision: a pivot below √eps of the largest means a
-    # (numerically) rank-deficient information matrix.
-    tol = jnp.sqrt(jnp.finfo(M.dtype).eps) * jnp.sqrt(jnp.max(jnp.abs(jnp.diagonal(M))))
-    ok = jnp.all(jnp.isfinite(L)) & jnp.all(d > tol)
-    return L, ok
+    return L, jnp.all(jnp.isfinite(L)) & well_conditioned(M)
 
 
 def _inverse_factor(L) -> Float[Array, "p p"]:
@@ -198,17 +196,12 @@ def criteria_from_observation(
     weighted = weights[0] * trace + weights[1] * det
     std = jnp.where(ok, jnp.sqrt(jnp.diagonal(cov)), inf)
     null: tuple[str, ...] = ()
-    Mh, okh = _concrete(M), _concrete(ok)
-    if names and Mh is not None and okh is not None and not bool(okh):
-        # Host-side naming of the null space: the parameters with weight in it. The
-        # null space may have several dimensions (one q2 level: k2, Kc, s0 act as one),
-        # and then any single eigenvector in it is an arbitrary, LAPACK-dependent mix:
-        # take every eigenvector whose eigenvalue is numerically zero (the smallest one
-        # at least) and the weight of each parameter over all of them.
-        w, V = np.linalg.eigh(Mh)
-        k = max(1, int(np.sum(w <= 1e-9 * max(float(w[-1]), 1e-300))))
-        v = np.linalg.norm(V[:, :k], axis=1)
-        null = tuple(n for n, a in zip(names, v, strict=True) if a > 0.1 * v.max())
+    okh = _concrete(ok)
+    if names and okh is not None and not bool(okh):
+        # Host-side naming of the null space (the design is concrete here).
+        Jh = _concrete(obs * (nominal[None, None, :] / sigma[:, None, None]))
+        if Jh is not None:
+            null = unidentifiable(Jh.reshape(-1, Jh.shape[-1]), names)
     return DesignCriteria(
         names=names,
         nominal=nominal,

@@ -32,8 +32,9 @@ from jaxtyping import Array, Float
 
 from .._batching import chunk_width, map_in_chunks
 from .._exported import exported
-from .._identification.lsq import levenberg_marquardt, masked_covariance
+from .._identification.lsq import levenberg_marquardt
 from .._io import Dataset, configurations
+from .._linalg.covariance import masked_covariance
 from .._model.candidates import Candidate
 from .._model.equilibrium import measured_deflections, with_unloaded
 from .._robot import URAD, Robot

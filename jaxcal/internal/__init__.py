@@ -1,27 +1,17 @@
 """Names that tests, benchmarks and notebooks need but that are not part of the stable
 public API (as `lineax.internal`): they may change between versions.
 
-This namespace sits above the library: it may reach the command line (`main`,
-`build_parser`), which nothing else in the library imports."""
+The command line is not imported here (nothing in the library imports it); its test
+door is the submodule `jaxcal.internal.cli`."""
 
 from .._cache import cache_info as cache_info, clear_cache as clear_cache
-from .._cli.main import (
-    COMMANDS as COMMANDS,
-    build_parser as build_parser,
-    fix_names as fix_names,
-    main as main,
-)
 from .._exported import (
     export_directory as export_directory,
     exported as exported,
     set_export_directory as set_export_directory,
 )
 from .._identification.identify import nonlinear_jit as nonlinear_jit
-from .._identification.lsq import (
-    covariance_from_jacobian as covariance_from_jacobian,
-    levenberg_marquardt as levenberg_marquardt,
-    masked_covariance as masked_covariance,
-)
+from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
 from .._identification.methods import (
     full_model_predictor as full_model_predictor,
     solve_linear_jit as solve_linear_jit,
@@ -29,6 +19,13 @@ from .._identification.methods import (
 from .._identification.result import make_result as make_result
 from .._identification.two_step import solve_two_step_jit as solve_two_step_jit
 from .._linalg import dense as dense
+from .._linalg.covariance import (
+    covariance_from_jacobian as covariance_from_jacobian,
+    masked_covariance as masked_covariance,
+    null_space as null_space,
+    unidentifiable as unidentifiable,
+    well_conditioned as well_conditioned,
+)
 from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
 from .._model.simulate import batch_deflections as batch_deflections

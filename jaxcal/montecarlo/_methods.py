@@ -19,8 +19,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._identification import methods as ident
+from .._identification.two_step import fit_two_step
 from .._io import Dataset, configurations
+from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
+from .._model.observation import observation_physical
 from .._parameters import get_parameters
 from .._robot import URAD, Robot
 
@@ -53,27 +57,15 @@ class TrialFit(NamedTuple):
     shared: tuple | None = None
 
 
-def null_space_names(
-    robot: Robot, design: Dataset, names: Sequence[str], rcond: float = 1e-10
-) -> tuple[str, ...]:
-    """Parameters among `names` (physical ones) that the design cannot determine: those
-    with a component above 0.1 in a null vector of the column-normalised Jacobian of the
-    full-model deflections (singular value below `rcond` of the largest)."""
-    from .._model.observation import observation_physical
-
+def null_space_names(robot: Robot, design: Dataset, names: Sequence[str]) -> tuple[str, ...]:
+    """Parameters among `names` (physical ones) that the design cannot determine
+    (`_linalg.covariance.unidentifiable` of the full model's Jacobian)."""
     phys = list(robot.parameter_names)
     cols = [phys.index(n) for n in names if n in phys]
     if not cols:
         return ()
     J = np.asarray(observation_physical(robot, design)).reshape(-1, len(phys))[:, cols]
-    norms = np.linalg.norm(J, axis=0)
-    zero = norms == 0
-    Js = J / np.where(zero, 1.0, norms)
-    _, s, vt = np.linalg.svd(Js, full_matrices=True)
-    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
-    null = vt[s < rcond * max(s.max(), 1e-300)]
-    bad = zero | (np.abs(null) > 0.1).any(axis=0) if null.size else zero
-    return tuple(phys[c] for c, b in zip(cols, bad, strict=True) if b)
+    return unidentifiable(J, [phys[c] for c in cols])
 
 
 def true_values(robot: Robot, design: Dataset, names: Sequence[str]) -> np.ndarray:
@@ -113,9 +105,6 @@ def trial_fit(
     """The per-trial identification of `method` for `design` (deflections replaced per
     trial). Checks identifiability once, on the design, so a bad design fails before any
     trial runs (the identification names the unidentifiable parameters)."""
-    from .._identification import methods as ident
-    from .._identification.two_step import fit_two_step
-
     kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
     fitters = {
         "linear": ident.fit_linear,
@@ -170,13 +159,12 @@ def trial_fit(
 @functools.cache
 def _nonlinear_trial(free: tuple[bool, ...], moments: bool) -> Callable:
     # One function object per setting, so that jit's cache finds it again.
-    from .._identification.methods import fit_nonlinear
 
     def fit(d, sigma, force, moment, robot, q):
         if not moments:
             # Host zeros: the model then leaves out the moment's generalised force.
             moment = np.zeros(d.shape)
         data = Dataset(q, force, moment, d, sigma)  # type: ignore[arg-type]
-        return _from_result(fit_nonlinear(robot, data, free=free))
+        return _from_result(ident.fit_nonlinear(robot, data, free=free))
 
     return fit
