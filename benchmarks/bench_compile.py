@@ -31,13 +31,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
-from jaxcal import linear_system, two_step_system  # noqa: E402
-from jaxcal.internal import (  # noqa: E402
-    compensate_rows as compensate_batch,
-    nonlinear_jit,
-    solve_linear_jit,
-    solve_two_step_jit,
-)
+from jaxcal import LinearMethod, NonlinearMethod, TwoStepMethod  # noqa: E402
+from jaxcal.internal import compensate_rows as compensate_batch, fit_jit  # noqa: E402
 
 DATA = Path(__file__).parent.parent / "tests" / "data" / "example_calibration.csv"
 
@@ -123,34 +118,12 @@ def main():
     logging.getLogger("jax").setLevel(logging.WARNING)
     robot = jaxcal.load_robot()
     data = jaxcal.read_dataset(DATA, robot)
-    free = (True,) * 8
-    u, inv = np.unique(np.asarray(data.q), axis=0, return_inverse=True)
-    rows = [
-        stages(
-            "identify nonlinear (48 rows)",
-            nonlinear_jit,
-            robot,
-            data,
-            jnp.asarray(u),
-            jnp.asarray(inv.reshape(-1)),
-            free,
-            "l2",
-            1.5,
-            64,
-        ),
-        stages(
-            "identify linear (48 rows)",
-            solve_linear_jit,
-            linear_system(robot, data, free=free[:6] + (False, False)),
-            data.deflection,
-        ),
-        stages(
-            "identify two-step (48 rows)",
-            solve_two_step_jit,
-            two_step_system(robot, data, free=free),
-            data.deflection,
-        ),
+    methods = [
+        ("identify nonlinear (48 rows)", NonlinearMethod()),
+        ("identify linear (48 rows)", LinearMethod()),
+        ("identify two-step (48 rows)", TwoStepMethod()),
     ]
+    rows = [stages(name, fit_jit, m, m.init(robot, data), data.deflection) for name, m in methods]
     t = np.linspace(0, 1, 1000)
     q = np.stack(
         [-30 + 60 * t, 15 + 15 * np.sin(np.pi * t), 5 - 10 * t, 10 + 20 * t, -70 + 30 * t, 40 * t],

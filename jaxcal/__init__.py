@@ -29,15 +29,24 @@ from ._identification.lsq import (
     LsqFit as LsqFit,
     nonlinear_fit as nonlinear_fit,
 )
-from ._identification.methods import (
-    IdentificationResult as IdentificationResult,
+from ._identification.method import (
+    AbstractMethod as AbstractMethod,
+    LinearMethod as LinearMethod,
+    NonlinearMethod as NonlinearMethod,
+    NonlinearState as NonlinearState,
+    TwoStepMethod as TwoStepMethod,
     fit_linear as fit_linear,
     fit_nonlinear as fit_nonlinear,
+    fit_two_step as fit_two_step,
+)
+from ._identification.methods import (
+    IdentificationResult as IdentificationResult,
+    LinearSystem as LinearSystem,
     linear_system as linear_system,
     solve_linear as solve_linear,
 )
 from ._identification.two_step import (
-    fit_two_step as fit_two_step,
+    TwoStepSystem as TwoStepSystem,
     solve_two_step as solve_two_step,
     two_step_system as two_step_system,
 )

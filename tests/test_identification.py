@@ -300,3 +300,61 @@ def test_robust_loss_downweights_outlier(robot, example, example_fit):
     assert 10 in robust.outliers(3.0)
     assert 10 in plain.outliers(3.0)
     assert robust.method == "nonlinear-huber"
+
+
+METHOD_OBJECTS = [
+    jaxcal.LinearMethod(),
+    jaxcal.TwoStepMethod(),
+    jaxcal.NonlinearMethod(),
+]
+
+
+@pytest.mark.parametrize("method", METHOD_OBJECTS, ids=lambda m: m.name)
+def test_method_init_once_then_fit_equals_identify(robot, example, method):
+    """`init` once, `fit` per deflection set: the same estimates as `identify`, and a
+    batch of deflection sets under `vmap` equals fitting them one by one."""
+    data, _ = example
+    state = method.init(robot, data)
+    fit = jax.jit(method.fit)
+    res = fit(state, data.deflection)
+    ref = identify(robot, data, method.name)
+    assert res.names == ref.names and bool(res.converged)
+    np.testing.assert_allclose(res.estimate, ref.estimate, rtol=1e-9)
+    np.testing.assert_allclose(res.std, ref.std, rtol=1e-9)
+    if method.name == "nonlinear":
+        return  # its vmap/loop equality is test_vmap_equals_loop's
+    rng = np.random.default_rng(1)
+    D = data.deflection + 2e-5 * rng.normal(size=(3, *data.deflection.shape))
+    batch = jax.vmap(method.fit, in_axes=(None, 0))(state, D)
+    for i in range(3):
+        np.testing.assert_allclose(batch.estimate[i], fit(state, D[i]).estimate, rtol=1e-10)
+
+
+def test_method_settings_are_checked():
+    with pytest.raises(ValueError, match="loss"):
+        jaxcal.NonlinearMethod(loss="l1")
+    with pytest.raises(ValueError, match="max_steps"):
+        jaxcal.NonlinearMethod(max_steps=0)
+
+
+def test_nonlinear_state_is_an_argument_designs_of_one_size_share_a_program(robot, example):
+    """The design lives in the state's arrays: a second design of the same size runs the
+    same compiled fit (no new trace), and gets its own answer."""
+    data, _ = example
+    method = jaxcal.NonlinearMethod(max_steps=8)
+    traces = []
+
+    @jax.jit
+    def fit(state, d):
+        traces.append(1)
+        return method.fit(state, d).estimate
+
+    a = method.init(robot, data)
+    other = jaxcal.Dataset(
+        data.q[::-1], data.force[::-1], data.moment[::-1], data.deflection[::-1], data.sigma
+    )
+    b = method.init(robot, other)
+    ea, eb = fit(a, data.deflection), fit(b, other.deflection)
+    assert len(traces) == 1
+    # The same rows in another order: the same least-squares problem.
+    np.testing.assert_allclose(ea, eb, rtol=1e-7)

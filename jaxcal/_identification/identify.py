@@ -1,5 +1,5 @@
-"""Host-side identification entry point: input checks, identifiability, then one of the
-pure fitting cores (`fit_linear`, `fit_two_step`, `fit_nonlinear`) under `jit`.
+"""Host-side identification entry point: input checks, identifiability, then one
+method's `init` and its pure `fit` under `jit` (`method.py`).
 
 Identifiability is decided *before* solving, from the σ-weighted design of the linear
 model (its columns `∂Δp/∂p`, each scaled by the parameter's prior value, then
@@ -20,21 +20,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._exported import exported
-from .._io import Dataset, configurations, q2_groups
+from .._io import Dataset, q2_groups
 from .._linalg.covariance import null_space, nullity
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
 from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
-from .methods import (
-    linear_columns,
-    linear_system,
-    nonlinear_with_groups,
-    solve_linear_jit,
-)
+from .method import METHODS, fit_jit, method_named
+from .methods import linear_columns
 from .result import IdentificationResult, resolve_name
-from .two_step import solve_two_step_jit, two_step_system
 
 __all__ = [
     "identify",
@@ -44,8 +39,6 @@ __all__ = [
     "design_matrix",
     "plausibility",
 ]
-
-METHODS = ("linear", "two-step", "nonlinear")
 
 #: Order in which parameters are proposed for fixing (last-resort ones first).
 _FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
@@ -241,13 +234,14 @@ def identify(
         )
     free = tuple(n not in fixed for n in names)
 
-    def fit(d: Dataset) -> IdentificationResult:
-        if method == "linear":
-            return _linear(robot, d, free)
-        if method == "two-step":
-            return _two_step(robot, d, free)
+    settings: dict = {"free": free}
+    if method == "nonlinear":
         loss = "huber" if robust else "l2"
-        return _nonlinear(robot, d, free, loss, float(huber_delta), int(max_steps))
+        settings.update(loss=loss, huber_delta=float(huber_delta), max_steps=int(max_steps))
+    solver = method_named(method, **settings)
+
+    def fit(d: Dataset) -> IdentificationResult:
+        return _fit_stored(solver, solver.init(robot, d), d.deflection)
 
     res = fit(data)
     if screen_gross:
@@ -340,40 +334,6 @@ def plausibility(robot: Robot, res: IdentificationResult) -> list[str]:
     return out
 
 
-# Module-level jitted cores: repeated calls with equal shapes reuse one compilation.
-@eqx.filter_jit
-def nonlinear_jit(robot, data, q_u, inv, free, loss, delta, steps, moments: bool = True):
-    return nonlinear_with_groups(robot, data, q_u, inv, free, loss, delta, steps, moments)
-
-
-#: The same program, kept traced on disk while the compilation cache is on: tracing it
-#: is most of a warm `jaxcal identify`.
-_nonlinear_stored = exported(nonlinear_jit)
-
-
-def _nonlinear(robot, data, free, loss, delta, steps):
-    u, inv = configurations(data.q)
-    # Row labels and the file name do not enter the computation: leaving them out lets
-    # one stored program serve every data set of the same shape.
-    plain = Dataset(data.q, data.force, data.moment, data.deflection, data.sigma)
-    # Whether the rows carry tool moments is decided here, on the host: inside the
-    # compiled fit the data are traced and a moment-free model could not be chosen.
-    return _nonlinear_stored(
-        robot,
-        plain,
-        jnp.asarray(u),
-        jnp.asarray(inv),
-        free,
-        loss,
-        delta,
-        steps,
-        data.has_moments,
-    )
-
-
-def _linear(robot, data, free):
-    return solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
-
-
-def _two_step(robot, data, free):
-    return solve_two_step_jit(two_step_system(robot, data, free=free), data.deflection)
+#: The fit kept traced on disk while the compilation cache is on: tracing the nonlinear
+#: fit is most of a warm `jaxcal identify`.
+_fit_stored = exported(fit_jit)

@@ -1,16 +1,11 @@
-"""Identification of the elastostatic parameters: the pure, vmappable fitting cores of the
-`linear` and `nonlinear` methods (the result type is in `result.py`, the `two-step`
-method in `two_step.py`, the host-side entry `identify` in `identify.py`).
+"""The numerical cores of the `linear` and `nonlinear` identification methods: the
+linear system (built once per design, solved per deflection set) and the nonlinear fit
+on the full-model predictor. The methods as objects (`init` / `fit`) are in
+`method.py`, the `two-step` core in `two_step.py`, the result type in `result.py`, the
+host-side entry `identify` in `identify.py`.
 
-Every core handles one data set and never raises on values: batch Monte-Carlo draws
-with `jax.vmap` over the deflections,
-
-```python
-D = ...                                             # (draws, n, 3) m
-res = jax.vmap(lambda d: fit_nonlinear(robot, data.with_deflection(d)))(D)
-res.estimate                                        # (draws, p) user units
-res.converged                                       # (draws,) failed draws are False
-```
+Every core handles one data set and never raises on values (failures are in the
+result's `result`), so Monte-Carlo draws batch with `jax.vmap` over the deflections.
 
 Parameter vectors are in user units (µrad/(N·m), N/m, m; `jaxcal.get_parameters`
 order). Covariances are `(JᵀWJ)⁻¹` with the *stated* σ of each row (not rescaled by χ²).
@@ -36,8 +31,6 @@ from .result import IdentificationResult, free_mask, make_result, resolve_name
 
 __all__ = [
     "IdentificationResult",
-    "fit_linear",
-    "fit_nonlinear",
     "linear_system",
     "solve_linear",
     "LinearSystem",
@@ -120,22 +113,10 @@ def solve_linear(system: LinearSystem, deflection: Float[Array, "n 3"]) -> Ident
     )
 
 
-#: `solve_linear` compiled once per shape (host-side callers; inside a trace it inlines).
-solve_linear_jit = eqx.filter_jit(solve_linear)
-
-
-def fit_linear(robot: Robot, data: Dataset, *, free=None) -> IdentificationResult:
-    """Weighted linear least squares, eq. (3), on the linear model (eq. 5, no gravity or
-    `H_θθ`): `solve_linear(linear_system(robot, data, free=free), data.deflection)`."""
-    if data.deflection is None:
-        raise ValueError("data has no deflections to fit")
-    return solve_linear_jit(linear_system(robot, data, free=free), data.deflection)
-
-
 # -------------------------------------------------------------- nonlinear method
 
 
-def _unique_rows(q) -> tuple[Array, Array]:
+def unique_rows(q) -> tuple[Array, Array]:
     """Distinct configurations and each row's index into them; identity when `q` is
     traced (the grouping only saves unloaded solves, it never changes the result)."""
     try:
@@ -146,7 +127,7 @@ def _unique_rows(q) -> tuple[Array, Array]:
     return jnp.asarray(u, q.dtype), jnp.asarray(inv)
 
 
-def _has_moments(data: Dataset) -> bool:
+def has_moments(data: Dataset) -> bool:
     try:
         return data.has_moments
     except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
@@ -163,9 +144,9 @@ def full_model_predictor(
     `data.q` is concrete). `moments`: whether the rows carry tool moments (default: read
     from the data where concrete, else assumed); without them the model is smaller."""
     if q_unique is None or inverse is None:
-        q_unique, inverse = _unique_rows(data.q)
+        q_unique, inverse = unique_rows(data.q)
     if moments is None:
-        moments = _has_moments(data)
+        moments = has_moments(data)
     moment = data.moment if moments else None
     q_all, f_all, m_all = with_unloaded(data.q, data.force, moment, q_unique)
 
@@ -173,30 +154,6 @@ def full_model_predictor(
         return measured_deflections(set_parameters(robot, p), q_all, f_all, m_all, inverse)
 
     return predict
-
-
-def fit_nonlinear(
-    robot: Robot,
-    data: Dataset,
-    *,
-    free=None,
-    loss: str = "l2",
-    huber_delta: float = 1.5,
-    max_steps: int = 64,
-) -> IdentificationResult:
-    """All compliances plus `Kc`, `s0` fitted to the *full* equilibrium model with
-    Levenberg–Marquardt, started at the robot's values (which also hold the fixed ones).
-
-    - `free`: names or bools over `robot.parameter_names` (default all).
-    - `loss`: `"l2"` or `"huber"` (threshold `huber_delta` in σ units).
-    - `max_steps`: LM step budget.
-
-    Pure and vmappable over `data.deflection`; failures give `converged = False`.
-    """
-    q_u, inv = _unique_rows(data.q)
-    return nonlinear_with_groups(
-        robot, data, q_u, inv, free_mask(robot, free), loss, huber_delta, max_steps
-    )
 
 
 def _to_physical(u, s0_fixed: bool, s0_ref):

@@ -38,7 +38,7 @@ from .._solution import RESULTS, result_of
 from .lsq import LinearFactor, linear_factor, linear_solve_factored
 from .result import IdentificationResult, free_mask, make_result
 
-__all__ = ["TwoStepSystem", "two_step_system", "solve_two_step", "fit_two_step", "step2_row"]
+__all__ = ["TwoStepSystem", "two_step_system", "solve_two_step", "step2_row"]
 
 
 def step2_row(lc, l2, phi, *, exact: bool = True) -> Float[Array, "... 3"]:
@@ -171,19 +171,3 @@ def solve_two_step(system: TwoStepSystem, deflection: Float[Array, "n 3"]) -> Id
     return make_result(
         "two-step", system.names, mask, params, cov, res, system.sigma, ok, result=result
     )
-
-
-def fit_two_step(
-    robot: Robot, data: Dataset, *, free=None, exact: bool = True
-) -> IdentificationResult:
-    """Two-step identification, eqs. (20)–(22): `solve_two_step(two_step_system(...),
-    data.deflection)`. The q2 grouping needs concrete `data.q` (vmap over deflections
-    is fine; under `jit` build the system outside)."""
-    if data.deflection is None:
-        raise ValueError("data has no deflections to fit")
-    system = two_step_system(robot, data, free=free, exact=exact)
-    return solve_two_step_jit(system, data.deflection)
-
-
-#: `solve_two_step` compiled once per shape (host-side callers; inside a trace it inlines).
-solve_two_step_jit = eqx.filter_jit(solve_two_step)

@@ -10,14 +10,12 @@ from .._exported import (
     exported as exported,
     set_export_directory as set_export_directory,
 )
-from .._identification.identify import nonlinear_jit as nonlinear_jit
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
+from .._identification.method import fit_jit as fit_jit
 from .._identification.methods import (
     full_model_predictor as full_model_predictor,
-    solve_linear_jit as solve_linear_jit,
 )
 from .._identification.result import make_result as make_result
-from .._identification.two_step import solve_two_step_jit as solve_two_step_jit
 from .._linalg import dense as dense
 from .._linalg.covariance import (
     covariance_from_jacobian as covariance_from_jacobian,

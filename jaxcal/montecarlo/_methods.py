@@ -13,14 +13,13 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification import methods as ident
-from .._identification.two_step import fit_two_step
+from .._identification.method import AbstractMethod, method_named
 from .._io import Dataset, configurations
 from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
@@ -103,25 +102,15 @@ def trial_fit(
     free: Sequence[str] | None = None,
 ) -> TrialFit:
     """The per-trial identification of `method` for `design` (deflections replaced per
-    trial). Checks identifiability once, on the design, so a bad design fails before any
-    trial runs (the identification names the unidentifiable parameters)."""
-    kw: dict[str, Any] = {} if free is None else {"free": tuple(free)}
-    fitters = {
-        "linear": ident.fit_linear,
-        "two-step": fit_two_step,
-        "nonlinear": ident.fit_nonlinear,
-    }
-    if method not in fitters:
-        raise ValueError(f"unknown method {method!r}; expected one of {sorted(fitters)}")
-    base = fitters[method]
+    trial): the method's `init` and `fit` (`jaxcal.AbstractMethod`) inside the trial's
+    trace, so that the noise σ and the loads may be traced (σ and load sweeps). Checks
+    identifiability once, on the design, so a bad design fails before any trial runs
+    (the identification names the unidentifiable parameters)."""
+    solver = method_named(method, **({} if free is None else {"free": tuple(free)}))
 
     # A host (numpy) copy of q: under `jit` closed-over jax arrays become tracers, and
     # the identification groups rows by q2 on the host. Loads may be traced.
     q, f, m = (np.asarray(a) for a in (design.q, design.force, design.moment))
-
-    def _data(d, sigma, force=f, moment=m) -> Dataset:
-        return Dataset(q, force, moment, d, sigma, design.ids, design.source)  # type: ignore[arg-type]
-
     no_moments = not np.any(m)
 
     def fit(d, sigma, force, moment):
@@ -130,10 +119,12 @@ def trial_fit(
         # force through every equilibrium (about 3x the cost per trial).
         if no_moments:
             moment = m
-        return _from_result(base(robot, _data(d, sigma, force, moment), **kw))
+        data = Dataset(q, force, moment, None, sigma, design.ids, design.source)  # type: ignore[arg-type]
+        return _from_result(solver.fit(solver.init(robot, data), d))
 
     # The names are static: abstract evaluation gets them without compiling anything.
-    probe = jax.eval_shape(lambda d: base(robot, _data(d, design.sigma), **kw), clean)
+    state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
+    probe = jax.eval_shape(lambda d: solver.fit(state, d), clean)
     names = tuple(probe.names)
     inputs, shared = (), None
     if method == "nonlinear" and len(configurations(q)[0]) == len(q):
@@ -141,9 +132,8 @@ def trial_fit(
         # with as many distinct rows shares one compiled study. (Repeated rows keep
         # the fit closed over the design, which solves each distinct unloaded
         # equilibrium once.)
-        mask = tuple(bool(b) for b in np.asarray(ident.free_mask(robot, kw.get("free"))))
-        fit = _nonlinear_trial(mask, not no_moments)
-        inputs, shared = (robot, jnp.asarray(q)), ("nonlinear", mask, not no_moments)
+        fit = _traced_design(solver, not no_moments)
+        inputs, shared = (robot, jnp.asarray(q)), (solver, not no_moments)
     return TrialFit(
         names,
         true_values(robot, design, names),
@@ -157,14 +147,14 @@ def trial_fit(
 
 
 @functools.cache
-def _nonlinear_trial(free: tuple[bool, ...], moments: bool) -> Callable:
+def _traced_design(solver: AbstractMethod, moments: bool) -> Callable:
     # One function object per setting, so that jit's cache finds it again.
 
     def fit(d, sigma, force, moment, robot, q):
         if not moments:
             # Host zeros: the model then leaves out the moment's generalised force.
             moment = np.zeros(d.shape)
-        data = Dataset(q, force, moment, d, sigma)  # type: ignore[arg-type]
-        return _from_result(ident.fit_nonlinear(robot, data, free=free))
+        data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
+        return _from_result(solver.fit(solver.init(robot, data), d))
 
     return fit
