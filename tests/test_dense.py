@@ -76,11 +76,28 @@ def test_lineax_solvers_value_and_gradient(solver):
     np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-14)
 
 
-def test_small_qr_least_squares_via_lineax():
+@pytest.mark.parametrize("shape", [(9, 4), (4, 9), (5, 5)], ids=["tall", "wide", "square"])
+def test_small_qr_matches_lineax_qr_both_ways(shape):
+    """Least squares (tall), minimum norm (wide), exact (square), and the transposed
+    problem of each from the same factorisation, as `lx.QR`; reverse mode through
+    `lx.linear_solve` (which uses the transpose) agrees too."""
     rng = np.random.default_rng(4)
-    M, c = jnp.asarray(rng.normal(size=(9, 4))), jnp.asarray(rng.normal(size=9))
-    x = lx.linear_solve(lx.MatrixLinearOperator(M), c, D.SmallQR()).value
-    np.testing.assert_allclose(x, np.linalg.lstsq(np.asarray(M), np.asarray(c), rcond=None)[0])
+    M = jnp.asarray(rng.normal(size=shape))
+    b, c = jnp.asarray(rng.normal(size=shape[0])), jnp.asarray(rng.normal(size=shape[1]))
+    op = lx.MatrixLinearOperator(M)
+    ours, ref = D.SmallQR(), lx.QR()
+    s1, s2 = ours.init(op, {}), ref.init(op, {})
+    np.testing.assert_allclose(ours.compute(s1, b, {})[0], ref.compute(s2, b, {})[0], 1e-10)
+    t1, t2 = ours.transpose(s1, {})[0], ref.transpose(s2, {})[0]
+    np.testing.assert_allclose(ours.compute(t1, c, {})[0], ref.compute(t2, c, {})[0], 1e-10)
+    x = lx.linear_solve(op, b, D.SmallQR()).value
+    np.testing.assert_allclose(x, np.linalg.lstsq(np.asarray(M), np.asarray(b), rcond=None)[0])
+
+    def loss(M, solver):
+        return jnp.sum(lx.linear_solve(lx.MatrixLinearOperator(M), b, solver).value ** 2)
+
+    g = jax.grad(loss)(M, D.SmallQR())
+    np.testing.assert_allclose(g, jax.grad(loss)(M, lx.QR()), rtol=1e-8, atol=1e-12)
 
 
 def test_vmap_equals_loop():

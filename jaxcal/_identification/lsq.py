@@ -25,7 +25,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._linalg.covariance import covariance_from_jacobian
-from .._linalg.dense import SmallQR
+from .._linalg.solvers import qr_solver
 from .._solution import RESULTS, result_of
 
 __all__ = [
@@ -65,10 +65,10 @@ class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
 
 def levenberg_marquardt(rtol: float, atol: float) -> StallingLevenbergMarquardt:
     """The one Levenberg–Marquardt solver of jaxcal (identify, Monte-Carlo, discover):
-    the stall check above, and Householder QR in plain jnp (`SmallQR`) for its linear
-    steps, because fits run vmapped and batched LAPACK kernels can deadlock XLA's CPU
-    pool (see `_linalg/dense.py`)."""
-    return StallingLevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=SmallQR())  # pyright: ignore[reportCallIssue]
+    the stall check above, and QR for its linear steps from `_linalg.solvers` (by
+    default Householder in plain jnp: fits run vmapped, and batched LAPACK kernels can
+    deadlock XLA's CPU pool, see `_linalg/dense.py`)."""
+    return StallingLevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=qr_solver())  # pyright: ignore[reportCallIssue]
 
 
 class LsqFit(eqx.Module):

@@ -29,7 +29,8 @@ import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .dense import SmallCholesky, eigvalsh
+from .dense import eigvalsh
+from .solvers import cholesky_solver
 
 __all__ = [
     "RCOND",
@@ -90,7 +91,9 @@ def covariance_from_jacobian(
     eye = jnp.eye(q, dtype=N.dtype)
     op = lx.MatrixLinearOperator(jnp.where(well, Ns, eye), lx.positive_semidefinite_tag)
     X = jax.vmap(
-        lambda b: lx.linear_solve(op, b, SmallCholesky(), throw=False).value, in_axes=1, out_axes=1
+        lambda b: lx.linear_solve(op, b, cholesky_solver(), throw=False).value,
+        in_axes=1,
+        out_axes=1,
     )(eye)
     cov = X / (d[:, None] * d[None, :])
     cov = 0.5 * (cov + cov.T)

@@ -36,6 +36,9 @@ __all__ = [
     "lu_factor",
     "lu_solve",
     "lstsq_qr",
+    "qr_factor",
+    "qr_lstsq",
+    "qr_min_norm",
     "eigvalsh",
     "SmallLU",
     "SmallCholesky",
@@ -129,27 +132,61 @@ def lu_solve(
     return jnp.zeros_like(w).at[perm].set(w)
 
 
-def lstsq_qr(A: Float[Array, "m n"], b: Float[Array, " m"]) -> Float[Array, " n"]:
-    """Least-squares solution of `A x ≈ b` (m ≥ n, full column rank) by Householder QR:
-    no normal equations, so the conditioning is that of `A`, not its square."""
+def qr_factor(
+    A: Float[Array, "m n"],
+) -> tuple[Float[Array, "m n"], Float[Array, " n"], Float[Array, "n n"]]:
+    """Householder QR of a tall matrix (m ≥ n): reflectors `V` (column k is `v_k`, zero
+    above row k), their factors `beta` (`H_k = I − beta_k v_k v_kᵀ`) and the upper
+    triangle `R`, so that `A = H_0 ⋯ H_{n−1} [R; 0]`."""
     m, n = A.shape
     if m < n:
-        raise ValueError(f"lstsq_qr needs at least as many rows as columns, got A {A.shape}")
+        raise ValueError(f"qr_factor needs at least as many rows as columns, got A {A.shape}")
     rows, cols = jnp.arange(m), jnp.arange(n)
 
     def reflect(k, carry):
-        A, b = carry
+        A, V, beta = carry
         x = jnp.where(rows >= k, A[:, k], 0.0)
         sign = jnp.where(A[k, k] >= 0, 1.0, -1.0).astype(A.dtype)
         alpha = -sign * jnp.sqrt(x @ x)
         v = x.at[k].add(-alpha)
         vv = v @ v
-        beta = jnp.where(vv > 0, 2.0 / jnp.where(vv > 0, vv, 1.0), 0.0)
-        A = A - beta * jnp.outer(v, jnp.where(cols >= k, v @ A, 0.0))
-        return A, b - beta * v * (v @ b)
+        b = jnp.where(vv > 0, 2.0 / jnp.where(vv > 0, vv, 1.0), 0.0)
+        A = A - b * jnp.outer(v, jnp.where(cols >= k, v @ A, 0.0))
+        return A, V.at[:, k].set(v), beta.at[k].set(b)
 
-    A, b = jax.lax.fori_loop(0, n, reflect, (A, b))
-    return _backward(jnp.triu(A[:n, :n]), b[:n])
+    zeros = (jnp.zeros((m, n), A.dtype), jnp.zeros((n,), A.dtype))
+    A, V, beta = jax.lax.fori_loop(0, n, reflect, (A, *zeros))
+    return V, beta, jnp.triu(A[:n, :n])
+
+
+def _reflect(V, beta, b, reverse: bool):
+    # Qᵀb = H_{n−1} ⋯ H_0 b (forward order); Q y = H_0 ⋯ H_{n−1} y (reverse order).
+    n = V.shape[1]
+
+    def step(i, b):
+        k = n - 1 - i if reverse else i
+        v = V[:, k]
+        return b - beta[k] * v * (v @ b)
+
+    return jax.lax.fori_loop(0, n, step, b)
+
+
+def qr_lstsq(V, beta, R, b: Float[Array, " m"]) -> Float[Array, " n"]:
+    """Least-squares solution of `A x ≈ b` from `qr_factor(A)`."""
+    return _backward(R, _reflect(V, beta, b, reverse=False)[: R.shape[0]])
+
+
+def qr_min_norm(V, beta, R, c: Float[Array, " n"]) -> Float[Array, " m"]:
+    """Minimum-norm solution of the underdetermined `Aᵀ y = c` from `qr_factor(A)`:
+    `y = Q [R⁻ᵀ c; 0]`."""
+    z = _forward(R.T, c)
+    return _reflect(V, beta, jnp.zeros(V.shape[0], z.dtype).at[: z.shape[0]].set(z), reverse=True)
+
+
+def lstsq_qr(A: Float[Array, "m n"], b: Float[Array, " m"]) -> Float[Array, " n"]:
+    """Least-squares solution of `A x ≈ b` (m ≥ n, full column rank) by Householder QR:
+    no normal equations, so the conditioning is that of `A`, not its square."""
+    return qr_lstsq(*qr_factor(A), b)
 
 
 def eigvalsh(A: Float[Array, "n n"], sweeps: int = 12) -> Float[Array, " n"]:
@@ -264,13 +301,21 @@ class SmallCholesky(_SmallDense):
 
 
 class SmallQR(_SmallDense):
-    """lineax solver for small least-squares problems (m ≥ n) by Householder QR in `jnp`;
-    used for the damped Gauss–Newton steps of Levenberg–Marquardt."""
+    """lineax solver for full-rank rectangular (or square) problems by Householder QR
+    in `jnp`, factored once in `init`: least squares when overdetermined, the
+    minimum-norm solution when underdetermined, either way round (`transpose`), as
+    `lx.QR`. Used for the damped Gauss–Newton steps of Levenberg–Marquardt."""
 
     def _factor(self, matrix):
-        return matrix
+        # A wide matrix is factored transposed (as lineax does): `qr_factor` needs m ≥ n.
+        return qr_factor(matrix.T if matrix.shape[1] > matrix.shape[0] else matrix)
 
     def _solve(self, factors, b, transpose):
-        if transpose:
-            raise NotImplementedError("SmallQR does not solve the transposed problem")
-        return lstsq_qr(factors, b)
+        V, beta, R = factors
+        M, N = V.shape
+        # The factored matrix F is (M, N), M ≥ N. A right-hand side of F's row count
+        # asks for least squares in F, one of its column count for F's transposed,
+        # underdetermined problem; a square F goes by the transpose flag.
+        if b.shape[0] < M or (M == N and transpose):
+            return qr_min_norm(V, beta, R, b)
+        return qr_lstsq(V, beta, R, b)

@@ -21,7 +21,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._linalg.dense import SmallLU, is_positive_definite, lu_factor, lu_solve
+from .._linalg.dense import is_positive_definite, lu_factor, lu_solve
+from .._linalg.solvers import lu_solver
 from .._robot import G, Robot
 from .._solution import RESULTS, result_of
 from .compensator import spring_energy as _compensator_potential
@@ -134,9 +135,9 @@ def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> E
     rtol, atol = _tolerances(dtype)
     # Cauchy termination (small step *and* small change of the scaled residual); the
     # rate-based test misreads quadratic convergence to round-off as divergence.
-    # Linear algebra in plain jnp (SmallLU), not LAPACK: this solve runs vmapped, and
-    # batched LAPACK kernels can deadlock XLA's CPU thread pool (see `_dense`).
-    solver = optx.Newton(rtol=rtol, atol=atol, linear_solver=SmallLU(), cauchy_termination=True)
+    # LU from `_linalg.solvers` (by default in plain jnp, not LAPACK: this solve runs
+    # vmapped, and batched LAPACK kernels can deadlock XLA's CPU thread pool).
+    solver = optx.Newton(rtol=rtol, atol=atol, linear_solver=lu_solver(), cauchy_termination=True)
     # A warm start (e.g. the equilibrium at nearby angles) saves Newton steps; the
     # implicit adjoint makes the derivatives independent of it.
     x0 = jnp.zeros(scale.shape, dtype) if x0 is None else jax.lax.stop_gradient(x0).astype(dtype)
@@ -146,7 +147,7 @@ def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> E
         x0,
         args=(robot, q, force, moment, scale),
         max_steps=_MAX_STEPS,
-        adjoint=optx.ImplicitAdjoint(linear_solver=SmallLU()),
+        adjoint=optx.ImplicitAdjoint(linear_solver=lu_solver()),
         throw=False,
     )
     converged = sol.result == optx.RESULTS.successful

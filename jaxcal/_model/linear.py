@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import lineax as lx
 from jaxtyping import Array, Float
 
-from .._linalg.dense import SmallCholesky
+from .._linalg.solvers import cholesky_solver
 from .._robot import Robot
 from .compensator import compensator_stiffness
 from .equilibrium import dof_scale, equilibrium_residual, solve_state, tool_pose
@@ -90,7 +90,7 @@ def cartesian_compliance(
     J = _full_jacobian(robot, q, x)
     op = lx.MatrixLinearOperator(H, lx.positive_semidefinite_tag)
     # H⁻¹Jᵀ column by column; Cholesky because a stable equilibrium has H positive definite.
-    X = jax.vmap(lambda b: lx.linear_solve(op, b, SmallCholesky()).value, 1, 1)(J.T)
+    X = jax.vmap(lambda b: lx.linear_solve(op, b, cholesky_solver()).value, 1, 1)(J.T)
     C = J @ X
     return 0.5 * (C + C.T)
 
@@ -107,5 +107,5 @@ def cartesian_stiffness(
     C = cartesian_compliance(robot, q, force)
     op = lx.MatrixLinearOperator(C, lx.positive_semidefinite_tag)
     eye = jnp.eye(6, dtype=C.dtype)
-    K = jax.vmap(lambda b: lx.linear_solve(op, b, SmallCholesky()).value, 1, 1)(eye)
+    K = jax.vmap(lambda b: lx.linear_solve(op, b, cholesky_solver()).value, 1, 1)(eye)
     return 0.5 * (K + K.T)
