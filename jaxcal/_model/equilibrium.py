@@ -97,22 +97,26 @@ class Equilibrium(eqx.Module):
     """Result of one equilibrium solve.
 
     - `x`: deflections at equilibrium, rad: θ1..θ6 then the DOFs of model extensions.
-    - `converged`: Newton met its tolerance within its step budget.
-    - `stable`: the Hessian of the potential is positive definite there (a minimum).
+    - `result`: `RESULTS.successful`; `equilibrium_failed` when Newton did not meet its
+      tolerance within its step budget (or the solution is not finite); `unstable`
+      when it converged to a point where the Hessian of the potential is not positive
+      definite (a saddle, not a minimum).
     - `steps`: Newton steps taken.
-    - `result` (property): `RESULTS.successful`, `equilibrium_failed` or `unstable`.
+    - `converged`, `stable` (properties): the same outcome as two booleans (`stable`
+      is false wherever `converged` is).
     """
 
     x: Float[Array, " ndof"]
-    converged: Bool[Array, ""]
-    stable: Bool[Array, ""]
+    result: RESULTS
     steps: Int[Array, ""]
 
     @property
-    def result(self) -> RESULTS:
-        return result_of(
-            (self.converged, RESULTS.equilibrium_failed), (self.stable, RESULTS.unstable)
-        )
+    def converged(self) -> Bool[Array, ""]:
+        return ~(self.result == RESULTS.equilibrium_failed)
+
+    @property
+    def stable(self) -> Bool[Array, ""]:
+        return self.result == RESULTS.successful
 
     @property
     def theta(self) -> Float[Array, 6]:
@@ -160,7 +164,8 @@ def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> E
     else:
         stable = jnp.array(True)
     converged = converged & jnp.all(jnp.isfinite(x))
-    return Equilibrium(x=x, converged=converged, stable=stable, steps=sol.stats["num_steps"])
+    result = result_of((converged, RESULTS.equilibrium_failed), (stable, RESULTS.unstable))
+    return Equilibrium(x=x, result=result, steps=sol.stats["num_steps"])
 
 
 def _check_shapes(q, force, moment):
@@ -180,8 +185,8 @@ def solve_equilibrium(
     force: Float[Array, 3],
     moment: Float[Array, 3] | None = None,
 ) -> Equilibrium:
-    """Solve eq. (17) for one configuration without raising: check `.converged` and
-    `.stable` (for use under `jax.vmap`, where failed samples must be reported)."""
+    """Solve eq. (17) for one configuration without raising: check `.result` (for use
+    under `jax.vmap`, where failed samples must be reported)."""
     _check_shapes(q, force, moment)
     return solve_state(robot, q, force, moment, check_stability=True)
 
@@ -225,7 +230,7 @@ def solve_deflection(
     unloaded = solve_state(robot, q, jnp.zeros_like(jnp.asarray(force)), None, check_stability=True)
     p1, _ = tool_pose(robot, jnp.asarray(q, loaded.x.dtype), loaded.x)
     p0, _ = tool_pose(robot, jnp.asarray(q, unloaded.x.dtype), unloaded.x)
-    ok = loaded.converged & loaded.stable & unloaded.converged & unloaded.stable
+    ok = (loaded.result == RESULTS.successful) & (unloaded.result == RESULTS.successful)
     # Observation-level effects (e.g. a rotated tracker frame) act on the measured Δp.
     return observe_effects(robot, q, force, p1 - p0), ok
 
