@@ -284,3 +284,22 @@ def test_cli_q2_levels_option(capsys):
     assert main(["design", "--q2-levels", "span,free"]) == 2
     assert main(["design", "--model", "linear", "--q2-levels=-30,90"]) == 2
     assert "one entry per q2 group" in capsys.readouterr().err
+
+
+def test_cli_group_sizes_option(capsys):
+    """Unequal groups: the first group at the lowest q2, the last at the highest
+    (span levels), sizes reported per level; sizes that do not add up are named."""
+    from jaxcal.internal.cli import main
+
+    args = ["design", "--model", "linear", "--configs", "8", "--starts", "2", "--steps", "50"]
+    assert main([*args, "--group-sizes", "2,4,2", "--bound-pool", "0", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["group_sizes"] == [2, 4, 2]
+    q2 = np.asarray(res["configs_deg"])[:, 1]
+    np.testing.assert_allclose(q2[:2], min(res["q2_levels_deg"]), atol=1e-6)
+    np.testing.assert_allclose(q2[-2:], max(res["q2_levels_deg"]), atol=1e-6)
+    assert main([*args, "--group-sizes", "2,4,3"]) == 2
+    assert "must sum to the 8 distinct" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # argparse's own usage error
+        main([*args, "--group-sizes", "4,x"])
+    assert e.value.code == 2 and "comma list of integers" in capsys.readouterr().err

@@ -77,6 +77,15 @@ def register(sub) -> None:
         "for --parameters aggregated, free q2 for physical",
     )
     p.add_argument(
+        "--group-sizes",
+        type=_sizes_list,
+        default=None,
+        metavar="A,B,..",
+        help="configurations per q2 group, e.g. 4,5,3 (sums to the number of distinct "
+        "configurations; default equal sizes); with --q2-levels span the first group is "
+        "at the lowest q2 and the last at the highest",
+    )
+    p.add_argument(
         "--level-gap",
         type=float,
         default=20.0,
@@ -225,9 +234,28 @@ def _levels(text: str) -> str | tuple[float | None, ...]:
     return tuple(out)
 
 
+def _sizes_list(text: str) -> tuple[int, ...]:
+    # --group-sizes: a comma list of positive integers.
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a comma list of integers (e.g. 4,5,3)"
+        ) from None
+    if not sizes or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: every group needs at least one configuration")
+    return sizes
+
+
 def _level_values(d) -> list[float]:
     # The design's distinct q2 values (deg), ascending.
     return sorted({round(float(v), 6) for v in np.rad2deg(d.q[:, 1])})
+
+
+def _group_sizes(d) -> list[int]:
+    # Configurations per distinct q2 value, in the order of `_level_values`.
+    q2 = np.round(np.rad2deg(d.q[:, 1]), 6)
+    return [int(np.sum(q2 == v)) for v in _level_values(d)]
 
 
 def run_design(args: argparse.Namespace) -> int:
@@ -248,6 +276,14 @@ def run_design(args: argparse.Namespace) -> int:
     if G is not None and not 1 <= G <= n:
         raise ValueError(f"--groups must be in 1..{n} (distinct configurations), got {G}")
     groups = None if G is None else tuple(i % G for i in range(n))
+    if args.group_sizes is not None:
+        sizes = args.group_sizes
+        if sum(sizes) != n or (args.groups is not None and len(sizes) != args.groups):
+            raise ValueError(
+                f"--group-sizes {','.join(map(str, sizes))} must sum to the {n} distinct "
+                "configurations" + ("" if args.groups is None else f" in --groups {args.groups}")
+            )
+        groups = tuple(g for g, k in enumerate(sizes) for _ in range(k))
     d = optimise_design(
         robot,
         n,
@@ -284,6 +320,7 @@ def run_design(args: argparse.Namespace) -> int:
                 "distinct": len(d.q),
                 "repeats": reps,
                 "q2_levels_deg": _level_values(d),
+                "group_sizes": _group_sizes(d),
                 "configs_deg": np.rad2deg(d.q),
                 "loads_N": d.force,
                 "std": dict(zip(c.names, np.asarray(c.std).tolist(), strict=True)),
@@ -306,7 +343,7 @@ def run_design(args: argparse.Namespace) -> int:
         )
     levels = _level_values(d)
     if len(levels) < len(q):
-        shown = ", ".join(f"{v:g}" for v in levels)
+        shown = ", ".join(f"{v:g} ({k}x)" for v, k in zip(levels, _group_sizes(d), strict=True))
         print(f"q2 levels (deg): {shown}   (--q2-levels {args.q2_levels})")
     if reps > 1:
         print(f"{len(q)} distinct configurations, each measured {reps} times")
