@@ -348,6 +348,7 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
         "distinct",
         "repeats",
         "q2_levels_deg",
+        "group_sizes",  # configurations per q2 level, in the order of q2_levels_deg
         "configs_deg",
         "loads_N",
         "std",
@@ -359,6 +360,9 @@ def test_cli_design_and_evaluate(tmp_path, capsys):
     assert np.shape(res["configs_deg"]) == (12, 6)
     levels = sorted({round(v, 6) for v in np.asarray(res["configs_deg"])[:, 1]})
     assert res["q2_levels_deg"] == levels
+    q2 = np.round(np.asarray(res["configs_deg"])[:, 1], 6)
+    assert res["group_sizes"] == [int(np.sum(q2 == v)) for v in levels]
+    assert sum(res["group_sizes"]) == 12
     assert res["value"] <= res["random_best"]
     # The design's own configurations are in the bound's pool: efficiency in (0, 1].
     assert 0 < res["efficiency"] <= 1 and res["bound"] == pytest.approx(
