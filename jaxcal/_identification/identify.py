@@ -21,7 +21,7 @@ import numpy as np
 
 from .._exported import exported
 from .._io import Dataset, q2_groups
-from .._linalg.covariance import null_space, nullity
+from .._linalg.covariance import dead_columns, null_space, nullity
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
@@ -114,9 +114,8 @@ def identifiability(X: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], l
     """Parameters the design `X` (columns ↔ `names`) cannot determine
     (`_linalg.covariance.null_space`), and a minimal set to fix (preferring compensator
     parameters and k1). Host-side."""
-    bad_mask = null_space(X)
-    bad = set(np.flatnonzero(bad_mask).tolist())
-    dead = ~(np.linalg.norm(X, axis=0) > 0)
+    bad = set(np.flatnonzero(null_space(X)).tolist())
+    dead = dead_columns(X)
     fix = sorted(int(i) for i in np.flatnonzero(dead))
     cols = [i for i in range(X.shape[1]) if not dead[i]]
     order = sorted(
@@ -127,12 +126,14 @@ def identifiability(X: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], l
             else len(_FIX_PREFERENCE) + (len(names) - i)
         ),
     )
+    current = nullity(X[:, cols])
     for i in order:
-        if nullity(X[:, cols]) == 0:
+        if current == 0:
             break
         trial = [c for c in cols if c != i]
-        if nullity(X[:, trial]) < nullity(X[:, cols]):
-            cols = trial
+        n_trial = nullity(X[:, trial])
+        if n_trial < current:
+            cols, current = trial, n_trial
             fix.append(i)
     return [names[i] for i in sorted(bad)], [names[i] for i in sorted(fix)]
 

@@ -38,6 +38,8 @@ __all__ = [
     "well_conditioned",
     "covariance_from_jacobian",
     "masked_covariance",
+    "NO_SENSITIVITY",
+    "dead_columns",
     "null_space",
     "nullity",
     "unidentifiable",
@@ -110,22 +112,48 @@ def masked_covariance(
     return covariance_from_jacobian(jnp.concatenate([J * m[None, :], jnp.diag(1.0 - m)]))
 
 
+#: A column whose norm is at most this fraction of the largest has no sensitivity (it
+#: is unidentifiable on its own, and left out of the SVD so that round-off in it is not
+#: normalised up to a unit column).
+NO_SENSITIVITY = 1e-9
+
+
+def dead_columns(J: np.ndarray) -> np.ndarray:
+    """Host-side: `(q,)` bools, the columns of `J` `(m, q)` with no sensitivity (norm at
+    most `NO_SENSITIVITY` of the largest, or not finite)."""
+    norms = np.linalg.norm(np.asarray(J, np.float64), axis=0)
+    finite = np.isfinite(norms)
+    top = max(float(norms[finite].max(initial=0.0)), 1e-300)
+    return ~finite | (norms <= NO_SENSITIVITY * top)
+
+
+def _live_singular(J: np.ndarray, vectors: bool):
+    # The dead columns, and the SVD of the column-normalised live ones (singular values
+    # padded with zeros to one per live column).
+    J = np.asarray(J, np.float64)
+    dead = dead_columns(J)
+    live = J[:, ~dead]
+    if live.shape[1] == 0:
+        return dead, np.zeros(0), np.zeros((0, 0))
+    Js = live / np.linalg.norm(live, axis=0)
+    if vectors:
+        _, s, vt = np.linalg.svd(Js, full_matrices=True)
+    else:
+        s, vt = np.linalg.svd(Js, compute_uv=False), np.zeros((0, 0))
+    return dead, np.concatenate([s, np.zeros(Js.shape[1] - s.size)]), vt
+
+
+def _small(s: np.ndarray) -> np.ndarray:
+    return s < np.sqrt(RCOND) * max(float(s.max(initial=0.0)), 1e-300)
+
+
 def null_space(J: np.ndarray) -> np.ndarray:
     """Host-side: `(q,)` bools, the columns of the (σ-weighted) Jacobian `J` `(m, q)`
-    that the data cannot determine (see the module doc). A zero column is always
-    among them."""
-    J = np.asarray(J, np.float64)
-    if J.shape[1] == 0:
-        return np.zeros(0, bool)
-    norms = np.linalg.norm(J, axis=0)
-    dead = ~(norms > 0) | ~np.isfinite(norms)
-    Js = np.where(np.isfinite(J), J, 0.0)[:, ~dead] / norms[~dead]
-    if Js.shape[1] == 0:
-        return dead
-    _, s, vt = np.linalg.svd(Js, full_matrices=True)
-    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
-    null = vt[s < np.sqrt(RCOND) * max(float(s.max()), 1e-300)]
+    that the data cannot determine (see the module doc). A dead column
+    (`dead_columns`) is always among them."""
+    dead, s, vt = _live_singular(J, vectors=True)
     bad = dead.copy()
+    null = vt[_small(s)]
     if len(null):
         weight = np.linalg.norm(null, axis=0)
         bad[np.flatnonzero(~dead)] = weight > NAMED_WEIGHT * weight.max()
@@ -133,18 +161,10 @@ def null_space(J: np.ndarray) -> np.ndarray:
 
 
 def nullity(J: np.ndarray) -> int:
-    """Host-side: the dimension of the null space of `J`'s columns (zero columns
-    included), by the same threshold as `null_space`."""
-    J = np.asarray(J, np.float64)
-    if J.shape[1] == 0:
-        return 0
-    norms = np.linalg.norm(J, axis=0)
-    dead = ~(norms > 0)
-    if dead.all():
-        return int(dead.sum())
-    s = np.linalg.svd(J[:, ~dead] / norms[~dead], compute_uv=False)
-    s = np.concatenate([s, np.zeros(max(0, int((~dead).sum()) - s.size))])
-    return int(dead.sum()) + int(np.sum(s < np.sqrt(RCOND) * s.max()))
+    """Host-side: the dimension of the null space of `J`'s columns (dead columns
+    included), by the same thresholds as `null_space`."""
+    dead, s, _ = _live_singular(J, vectors=False)
+    return int(dead.sum()) + int(_small(s).sum())
 
 
 def unidentifiable(J: np.ndarray, names: tuple[str, ...] | list[str]) -> tuple[str, ...]:
