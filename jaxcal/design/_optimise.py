@@ -45,6 +45,7 @@ import dataclasses
 import sys
 import time
 import warnings
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -148,25 +149,54 @@ def _penalised(z, args):
 @exported
 @eqx.filter_jit
 def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: float):
-    # One penalty round for all starts, and everything the host needs to pick the best
-    # (decoded angles, criteria, exact constraint values) from the same compiled program.
+    # One penalty round for all starts. The criteria at the results are evaluated by a
+    # separate program (`_evaluate_batch`), compiled while this one compiles.
     solver = optx.BFGS(rtol=rtol, atol=rtol)
 
     def one(z):
         sol = optx.minimise(
             _penalised, solver, z, args=(problem, weight), max_steps=max_steps, throw=False
         )
-        q = _decode(problem, sol.value)
+        return sol.value, sol.stats["num_steps"]
+
+    return jax.vmap(one)(z0)
+
+
+@exported
+@eqx.filter_jit
+def _evaluate_batch(problem: DesignProblem, z):
+    # What the host needs to pick the best start: decoded angles, criteria, exact
+    # constraint values and the level-gap violation.
+    def one(z):
+        q = _decode(problem, z)
         return (
-            sol.value,
-            sol.stats["num_steps"],
             q,
             problem_criteria(problem, q),
             constraint_values(problem.robot, q),
-            jnp.max(_gap_violation(problem, sol.value[1]), initial=-jnp.inf),
+            jnp.max(_gap_violation(problem, z[1]), initial=-jnp.inf),
         )
 
-    return jax.vmap(one)(z0)
+    return jax.vmap(one)(z)
+
+
+def _warm_up(problem: DesignProblem, z, bound: dict | None) -> list[Future]:
+    # Compile the programs needed after the BFGS rounds (the evaluation of the starts
+    # and the bound) on a worker thread while the main thread traces and compiles BFGS:
+    # XLA compiles on one core, so on two or more cores these come for free (cold
+    # `jaxcal design --configs 12`: see benchmarks/README.md). The inputs have the
+    # shapes of the real calls; a failure here is raised again by the real call.
+    pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcal-design-warmup")
+    futures = [pool.submit(_evaluate_batch, problem, z)]
+    if bound is not None:
+        futures.append(pool.submit(design_bound, problem, **bound))
+    pool.shutdown(wait=False)
+    return futures
+
+
+def _settle(futures: list[Future]) -> None:
+    # The real calls follow; a warm-up's own error (if any) is theirs to raise.
+    for f in futures:
+        f.exception()
 
 
 @dataclass(frozen=True)
@@ -355,10 +385,14 @@ def optimise_design(
             q2_levels_deg=pins,
         )
     z = _encode(problem, q0)
+    use_bound = bound_pool > 0 and has_bound(problem)
+    warm = _warm_up(problem, z, dict(n=bound_pool, seed=seed, include=q0[0]) if use_bound else None)
     history = []
     best, crits, q = 0, None, None
     for r, w in enumerate(_WEIGHTS):
-        z, steps, q, crits, cv, gv = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
+        z, steps = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
+        _settle(warm[:1])
+        q, crits, cv, gv = _evaluate_batch(problem, z)
         val, cv = np.asarray(crits.value(criterion)), np.asarray(cv)
         viol = np.maximum(cv.max(axis=(1, 2)), np.asarray(gv))
         feas = (viol <= 1e-9) & np.isfinite(val)
@@ -390,7 +424,8 @@ def optimise_design(
         gap_viol = np.deg2rad(problem.level_gap_deg) - float(level_separation(q2g))
         cvb = np.append(cvb.ravel(), gap_viol)
     bound = None
-    if bound_pool > 0 and has_bound(problem):
+    if use_bound:
+        _settle(warm)
         bound = design_bound(problem, n=bound_pool, seed=seed, include=qb)
         if progress:
             print(
