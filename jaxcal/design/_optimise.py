@@ -179,12 +179,23 @@ def _evaluate_batch(problem: DesignProblem, z):
     return jax.vmap(one)(z)
 
 
+_WARMED: set = set()
+
+
 def _warm_up(problem: DesignProblem, z, bound: dict | None) -> list[Future]:
     # Compile the programs needed after the BFGS rounds (the evaluation of the starts
     # and the bound) on a worker thread while the main thread traces and compiles BFGS:
     # XLA compiles on one core, so on two or more cores these come for free (cold
     # `jaxcal design --configs 12`: see benchmarks/README.md). The inputs have the
     # shapes of the real calls; a failure here is raised again by the real call.
+    leaves, treedef = jax.tree.flatten((problem, z, bound))
+    key = (treedef, tuple(np.shape(x) if eqx.is_array(x) else x for x in leaves))
+    try:
+        if key in _WARMED:
+            return []  # compiled by an earlier call in this process: nothing to overlap
+        _WARMED.add(key)
+    except TypeError:
+        pass  # an unhashable setting: warm up every time
     pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcal-design-warmup")
     futures = [pool.submit(_evaluate_batch, problem, z)]
     if bound is not None:
