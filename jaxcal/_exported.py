@@ -82,51 +82,35 @@ def _write(path: Path, data: bytes) -> None:
         f.write(data)
 
 
-def exported(fn: Callable, tag: str = "") -> _Exported:
+def exported(fn: Callable, tag: str = "") -> Callable:
     """`fn` (a jitted function of pytrees of arrays and static values) that keeps its
     traced program on disk while the compilation cache is on; otherwise `fn` itself.
-    `tag` names what else the program depends on (e.g. the closure of a bound method).
-    The result's `prepare(*args)` only makes the traced program ready (loaded, or traced
-    and stored) for such arguments, without lowering, compiling or running it."""
-    return _Exported(fn, tag)
+    `tag` names what else the program depends on (e.g. the closure of a bound method)."""
 
-
-class _Exported:
-    def __init__(self, fn: Callable, tag: str):
-        functools.update_wrapper(self, fn)
-        # Set after `update_wrapper`, which copies the wrapped object's attributes.
-        self._fn, self._tag = fn, tag
-
-    def _program(self, args: tuple):
-        # (arrays, (callable, output skeleton)) of the stored program, or None to call
-        # `fn` itself (cache off, traced arguments, or a program that cannot be stored).
+    @functools.wraps(fn)
+    def call(*args):
         leaves, treedef = jax.tree.flatten(args)
         if _DIR is None or any(isinstance(x, jax.core.Tracer) for x in leaves):
-            return None
+            return fn(*args)
         is_arr = [eqx.is_array(x) for x in leaves]
         arrays = [x for x, a in zip(leaves, is_arr, strict=True) if a]
         statics = [x for x, a in zip(leaves, is_arr, strict=True) if not a]
-        key = _key(self._fn, self._tag, treedef, arrays, statics)
+        key = _key(fn, tag, treedef, arrays, statics)
         got = _LOADED.get(key) or _load(_DIR / f"{key}-cache")
         if got is None:
-            got = _export(self._fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache")
+            got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache")
         _LOADED[key] = got
-        return None if got == _UNEXPORTABLE else (arrays, got)
-
-    def prepare(self, *args) -> None:
-        self._program(args)
-
-    def __call__(self, *args):
-        program = self._program(args)
-        if program is None:
-            return self._fn(*args)
-        arrays, (run, skeleton) = program
+        if got == _UNEXPORTABLE:
+            return fn(*args)
+        run, skeleton = got
         flat, out_def = jax.tree.flatten(skeleton, is_leaf=lambda x: x is None)
         # Committed and uncommitted arguments lower to different calls (a second compile
         # of the whole program): commit them all to the default device.
         device = jax.devices()[0]
         outs = iter(run(*(jax.device_put(a, device) for a in arrays)))
         return jax.tree.unflatten(out_def, [next(outs) if x is None else x for x in flat])
+
+    return call
 
 
 def _load(path: Path):

@@ -62,22 +62,6 @@ def test_stored_program_matches_and_skips_tracing(store):
     assert len(list(store.glob("*-cache"))) == 3
 
 
-def test_prepare_stores_the_program_without_running_it(store):
-    z, w = jnp.arange(4.0), jnp.asarray(0.5)
-    TRACES.clear()
-    f.prepare(z, w, 4)
-    assert TRACES == [4]  # traced once, to export; nothing else
-    assert len(list(store.glob("*-cache"))) == 1
-    out = f(z, w, 4)  # the prepared program: no second trace
-    assert TRACES == [4]
-    np.testing.assert_allclose(np.asarray(out.value), np.asarray(z**4 * 0.5 + 1))
-    # With the store off, prepare does nothing and the call is the plain function.
-    set_export_directory(None)
-    TRACES.clear()
-    f.prepare(z, w, 5)
-    assert TRACES == []
-
-
 def test_corrupt_entry_is_exported_again(store):
     z, w = jnp.arange(3.0), jnp.asarray(2.0)
     f(z, w, 1)

@@ -184,7 +184,7 @@ _WARMED: set = set()
 
 def _warm_up(problem: DesignProblem, z, bound: dict | None) -> list[Future]:
     # Compile the programs needed after the BFGS rounds (the evaluation of the starts
-    # and the bound) on a worker thread while the main thread compiles and runs BFGS:
+    # and the bound) on a worker thread while the main thread traces and compiles BFGS:
     # XLA compiles on one core, so on two or more cores these come for free (cold
     # `jaxcal design --configs 12`: see benchmarks/README.md). The inputs have the
     # shapes of the real calls; a failure here is raised again by the real call.
@@ -397,9 +397,6 @@ def optimise_design(
         )
     z = _encode(problem, q0)
     use_bound = bound_pool > 0 and has_bound(problem)
-    # The BFGS program is traced first, alone: the worker's tracing would compete with it
-    # for the interpreter, while its compiles overlap BFGS's compile and first round.
-    _minimise_batch.prepare(problem, z, jnp.asarray(_WEIGHTS[0]), max_steps, rtol)
     warm = _warm_up(problem, z, dict(n=bound_pool, seed=seed, include=q0[0]) if use_bound else None)
     history = []
     best, crits, q = 0, None, None
