@@ -13,7 +13,6 @@ from collections.abc import Callable
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["chunk_width", "map_in_chunks"]
@@ -28,15 +27,21 @@ def chunk_width(cpu: int, accelerator: int) -> int:
 def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -> Any:
     """`fn(*arrays)` computed on chunks of `chunk` members along the leading axis of
     every array (`None` passes through), outputs concatenated along their leading axis
-    and cut to `size`. `fn` must map a batch of `chunk` members to a pytree whose array
-    leaves have that batch axis first."""
+    and cut to `size`, as numpy arrays. `fn` must map a batch of `chunk` members to a
+    pytree whose array leaves have that batch axis first.
+
+    The padding, slicing and concatenation are done in numpy on the host: as eager JAX
+    operations each new shape was a small program to compile (or, with the compilation
+    cache, to load), ~3 s of a warm `jaxcal discover`."""
     if size < 1:
         raise ValueError(f"nothing to compute: batch size {size}")
     pad = (-size) % chunk
     idx = np.concatenate([np.arange(size), np.zeros(pad, int)])
-    arrays = tuple(None if a is None else jnp.asarray(a)[idx] for a in arrays)
+    arrays = tuple(None if a is None else np.asarray(a)[idx] for a in arrays)
     outs = [
         fn(*(None if a is None else a[i : i + chunk] for a in arrays))
         for i in range(0, size + pad, chunk)
     ]
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *outs)
+    return jax.tree_util.tree_map(
+        lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:size], *outs
+    )

@@ -36,6 +36,7 @@ __all__ = ["export_directory", "exported", "set_export_directory"]
 
 _DIR: Path | None = None
 _LOADED: dict[str, Any] = {}
+_KEYS: dict[tuple, str] = {}
 _UNEXPORTABLE = b"unexportable"
 
 
@@ -62,6 +63,21 @@ def _source_hash() -> str:
 
 
 def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
+    # Memoised: the string form of a large argument structure (the discrepancy
+    # SuperModel's) costs milliseconds, and some programs are called hundreds of times.
+    shapes = tuple((a.shape, str(a.dtype)) for a in arrays)
+    x64 = bool(jax.config.jax_enable_x64)  # pyright: ignore[reportAttributeAccessIssue]
+    memo = (fn, tag, treedef, tuple(statics), shapes, x64)
+    try:
+        key = _KEYS.get(memo)
+    except (TypeError, ValueError):  # an unhashable (or array-valued) static value
+        return _key_of(fn, tag, treedef, arrays, statics)
+    if key is None:
+        key = _KEYS[memo] = _key_of(fn, tag, treedef, arrays, statics)
+    return key
+
+
+def _key_of(fn: Callable, tag: str, treedef, arrays, statics) -> str:
     parts = [
         f"{fn.__module__}.{fn.__qualname__}",
         tag,
@@ -107,7 +123,7 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         # Committed and uncommitted arguments lower to different calls (a second compile
         # of the whole program): commit them all to the default device.
         device = jax.devices()[0]
-        outs = iter(run(*(jax.device_put(a, device) for a in arrays)))
+        outs = iter(run(*jax.device_put(arrays, device)))
         return jax.tree.unflatten(out_def, [next(outs) if x is None else x for x in flat])
 
     return call
