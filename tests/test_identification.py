@@ -358,3 +358,19 @@ def test_nonlinear_state_is_an_argument_designs_of_one_size_share_a_program(robo
     assert len(traces) == 1
     # The same rows in another order: the same least-squares problem.
     np.testing.assert_allclose(ea, eb, rtol=1e-7)
+
+
+def test_nonlinear_init_groups_rows_inside_a_trace(robot, example):
+    """The example's 48 rows are 16 configurations, each with its own unloaded
+    equilibrium, whether `init` runs on the host (identify) or inside a compiled
+    program (the Monte-Carlo chunk, where a host array passed through `jnp.asarray`
+    is a tracer): ungrouped, every trial solved 48 unloaded equilibria (1.7x its cost)."""
+    data, _ = example
+    q, f, m, s = (np.asarray(a) for a in (data.q, data.force, data.moment, data.sigma))
+    n_conf = len(np.unique(q, axis=0))
+    assert n_conf < len(data)
+    method = jaxcal.NonlinearMethod()
+    host = method.init(robot, data)
+    # As the Monte-Carlo trial builds it: host arrays, inside the trace.
+    traced = jax.eval_shape(lambda: method.init(robot, jaxcal.Dataset(q, f, m, None, s)))
+    assert host.q_unique.shape == traced.q_unique.shape == (n_conf, 6)

@@ -155,15 +155,17 @@ class NonlinearMethod(AbstractMethod):
         # Traceable: with traced angles every row is its own configuration, and traced
         # moments are assumed non-zero (pass host zeros for a moment-free design).
         dtype = robot.compliance.dtype
-        q = jnp.asarray(design.q, dtype)
-        u, inv = unique_rows(q)
+        # Grouped before any conversion: inside `jit` even a host array becomes a tracer
+        # once passed through `jnp.asarray`, and traced rows are not grouped (every row
+        # then solves its own unloaded equilibrium: 48 instead of 16 for the example).
+        u, inv = unique_rows(design.q)
         return NonlinearState(
             robot=robot,
-            q=q,
+            q=jnp.asarray(design.q, dtype),
             force=jnp.asarray(design.force, dtype),
             moment=jnp.asarray(design.moment, dtype) if has_moments(design) else None,
             sigma=jnp.asarray(design.sigma, dtype),
-            q_unique=u,
+            q_unique=jnp.asarray(u, dtype),
             inverse=inv,
             mask=free_mask(robot, self.free),
         )
