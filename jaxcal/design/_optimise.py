@@ -32,7 +32,8 @@ Constraints:
   violations of the constraint tightened by a small margin, in rounds of increasing
   weight (each round warm-starts from the last; progress is printed per round).
 
-All starts run in one `vmap`; with `pool=N` they are the best of N random feasible
+All starts run in one program (one after another on a CPU, in a `vmap` on an
+accelerator); with `pool=N` they are the best of N random feasible
 designs (evaluated first, in one vmapped program), whose best value is reported as the
 reference. The returned design is the best *feasible* start, checked on the exact
 constraints afterwards (never assumed); `feasible=False` is reported if no start is
@@ -159,6 +160,13 @@ def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: fl
         )
         return sol.value, sol.stats["num_steps"]
 
+    if jax.default_backend() == "cpu":
+        # One start after another: on a CPU a batched while loop gains little from
+        # vectorising small matrices, each start stops at its own convergence instead of
+        # the slowest one's, and JAX traces the loop once instead of batching BFGS's
+        # loop around the equilibrium's (cold `jaxcal design --configs 12`: trace 7.4 ->
+        # 4.5 s, rounds 9.9 -> 8.0 s; benchmarks/README.md). Accelerators keep the vmap.
+        return jax.lax.map(one, z0)
     return jax.vmap(one)(z0)
 
 
