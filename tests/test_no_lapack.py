@@ -73,11 +73,14 @@ def test_cartesian_compliance_has_no_lapack(robot, design):
     assert _lapack_calls(f.lower(design.q)) == set()
 
 
-@pytest.mark.parametrize("method", ["linear", "two-step", "nonlinear"])
-def test_monte_carlo_chunk_has_no_lapack(robot, design, method):
+@pytest.mark.parametrize(
+    "method, sequential",
+    [("linear", False), ("two-step", False), ("nonlinear", False), ("nonlinear", True)],
+)
+def test_monte_carlo_chunk_has_no_lapack(robot, design, method, sequential):
     tf, d0, sigma, _ = prepare_study(robot, design, method, None, None, None)
     mesh = Mesh(np.array(jax.devices()), ("trials",))
-    fn = _make_chunk_fn(tf.fit, 4, mesh, None, False, None)
+    fn = _make_chunk_fn(tf.fit, 4, mesh, None, False, None, sequential)
     n = d0.shape[0]
     args = (
         jax.random.key(0),

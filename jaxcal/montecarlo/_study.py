@@ -231,7 +231,16 @@ def run_study(
     force = jnp.zeros((n, 3), d0.dtype) if tf.force is None else jnp.asarray(tf.force)
     moment = jnp.zeros((n, 3), d0.dtype) if tf.moment is None else jnp.asarray(tf.moment)
     args0 = (key, jnp.int64(0), jnp.int64(trials), d0, sigma, true, force, moment, tf.inputs)
-    ckey = (chunk, tuple(d.id for d in devices), student_t, keep_estimates, histogram_bins)
+    # Iterative fits run trial after trial on a single CPU device (`make_chunk_fn`).
+    sequential = method == "nonlinear" and ndev == 1 and devices[0].platform == "cpu"
+    ckey = (
+        chunk,
+        tuple(d.id for d in devices),
+        student_t,
+        keep_estimates,
+        histogram_bins,
+        sequential,
+    )
     if tf.shared is not None:
         # A fit that takes the design as arguments: one program per size, kept for
         # every later study (the key holds the argument structure, shapes included).
@@ -239,7 +248,9 @@ def run_study(
         ckey = (tf.shared, *ckey, jax.tree.structure(args0), *_shapes(args0))
     t0 = time.perf_counter()
     if ckey not in cache:
-        fn = _make_chunk_fn(tf.fit, chunk, mesh, student_t, keep_estimates, histogram_bins)
+        fn = _make_chunk_fn(
+            tf.fit, chunk, mesh, student_t, keep_estimates, histogram_bins, sequential
+        )
         # Compile ahead of time to time it; the jitted function then finds this
         # executable in JAX's cache.
         fn.lower(*args0).compile()
