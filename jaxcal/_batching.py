@@ -15,13 +15,33 @@ from typing import Any
 import jax
 import numpy as np
 
-__all__ = ["chunk_width", "map_in_chunks"]
+__all__ = ["batch_map", "chunk_width", "map_in_chunks"]
 
 
 def chunk_width(cpu: int, accelerator: int) -> int:
     """Members per call for the default backend: `cpu` where a member costs the same in
     any batch (the width only pads), `accelerator` where width is what it gains from."""
     return cpu if jax.default_backend() == "cpu" else accelerator
+
+
+def batch_map(fn: Callable[..., Any], *xs: Any, sequential: bool | None = None) -> Any:
+    """`fn` applied to every member along the leading axis of `xs`, inside a traced
+    program: in a `vmap`, or one member after another (`jax.lax.map`) with
+    `sequential` (default: on a CPU backend).
+
+    For iterative solves whose step counts vary from member to member (BFGS from
+    different starts, Levenberg–Marquardt on different noise) around the equilibrium's
+    Newton loop, one after another is the better choice on a CPU: each member stops at
+    its own convergence instead of the slowest one's, and JAX traces the loops once
+    instead of batching a while loop around another (design, nonlinear Monte-Carlo). Where
+    every member takes about the same steps, the vmap's vectorised arithmetic wins, on a
+    CPU too (compensation of a path: 3x faster run in a vmap). Figures:
+    `benchmarks/README.md`. An accelerator gains from the width."""
+    if sequential is None:
+        sequential = jax.default_backend() == "cpu"
+    if sequential:
+        return jax.lax.map(lambda args: fn(*args), xs)
+    return jax.vmap(fn)(*xs)
 
 
 def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -> Any:

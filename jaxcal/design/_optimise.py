@@ -56,6 +56,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .._batching import batch_map
 from .._exported import exported
 from .._io import Dataset
 from .._robot import Robot
@@ -160,14 +161,9 @@ def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: fl
         )
         return sol.value, sol.stats["num_steps"]
 
-    if jax.default_backend() == "cpu":
-        # One start after another: on a CPU a batched while loop gains little from
-        # vectorising small matrices, each start stops at its own convergence instead of
-        # the slowest one's, and JAX traces the loop once instead of batching BFGS's
-        # loop around the equilibrium's (cold `jaxcal design --configs 12`: trace 7.4 ->
-        # 4.5 s, rounds 9.9 -> 8.0 s; benchmarks/README.md). Accelerators keep the vmap.
-        return jax.lax.map(one, z0)
-    return jax.vmap(one)(z0)
+    # On a CPU one start after another (cold `jaxcal design --configs 12`: trace 7.4 ->
+    # 4.5 s, rounds 9.9 -> 8.0 s against a vmap; benchmarks/README.md).
+    return batch_map(one, z0)
 
 
 @exported

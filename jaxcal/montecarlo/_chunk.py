@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, Float
 
+from .._batching import batch_map
 from .._solution import NAMES, RESULTS, result_of
 
 __all__ = ["ChunkOut", "REASONS", "make_chunk_fn", "trial_noise"]
@@ -99,8 +100,9 @@ def make_chunk_fn(
         # identification) is independent, so only the reductions below communicate.
         idx = jax.lax.with_sharding_constraint(idx, trial_spec)
         noise = jax.vmap(lambda i: trial_noise(key, i, sigma, student_t))(idx)
-        one = lambda e: fit(d0 + e, sigma, force, moment, *inputs)  # noqa: E731
-        est, std, lo, hi, outcome = jax.lax.map(one, noise) if sequential else jax.vmap(one)(noise)
+        est, std, lo, hi, outcome = batch_map(
+            lambda e: fit(d0 + e, sigma, force, moment, *inputs), noise, sequential=sequential
+        )
         finite = jnp.all(jnp.isfinite(est), axis=1) & jnp.all(jnp.isfinite(std), axis=1)
         # The method's own reason first; a non-finite estimate fails either way.
         result = jax.vmap(lambda o, f: RESULTS.where(f, o, RESULTS.nonfinite))(
