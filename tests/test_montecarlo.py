@@ -356,3 +356,30 @@ def test_sequential_chunk_equals_the_vmapped_one(robot, design):
     diff = np.abs(np.asarray(a.est) - np.asarray(b.est))[np.asarray(a.ok)]
     assert np.all(diff <= 1e-3 * std)
     np.testing.assert_array_equal(np.asarray(a.covered), np.asarray(b.covered))
+
+
+def test_a_study_closed_over_its_design_compiles_once(robot, design):
+    # The example repeats its configurations, so each method's fit is closed over the
+    # design. A second study of equal robot and design content (a notebook cell run
+    # again) reuses the compiled program and gives the same numbers for the same seed;
+    # another design has another key.
+    from jaxcal.internal import prepare_study
+
+    def shifted(dq):
+        # Shifted by a constant: the rows stay repeated, the content is new to this run.
+        q = np.rad2deg(np.asarray(design.q)) + dq
+        return jaxcal.Dataset.from_arrays(q, np.asarray(design.force), sigma_mm=0.02)
+
+    ds = shifted(0.0123)
+    kw = dict(trials=64, method="linear", noise_std=SIGMA)
+    a = monte_carlo(robot, ds, seed=1, **kw)
+    b = monte_carlo(robot, shifted(0.0123), seed=2, **kw)
+    c = monte_carlo(robot, ds, seed=1, **kw)
+    assert a.compile_seconds > 0.1
+    assert b.compile_seconds < 0.05 * a.compile_seconds
+    np.testing.assert_array_equal(c.mean, a.mean)
+    assert not np.array_equal(b.mean, a.mean)
+    keys = [
+        prepare_study(robot, d, "linear", None, None, None)[0].shared for d in (ds, shifted(0.5))
+    ]
+    assert keys[0] is not None and keys[1] is not None and keys[0] != keys[1]

@@ -11,6 +11,7 @@ trial.
 from __future__ import annotations
 
 import functools
+import hashlib
 import re
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
@@ -41,10 +42,12 @@ class TrialFit(NamedTuple):
     (called only when the noise-free fit fails).
 
     `inputs`: further traced arguments of `fit` (the robot and the design's angles, for
-    a fit that does not bake them in); `shared`: a hashable key when `fit` depends on
-    nothing else, so that studies of other designs of the same size (or another robot
-    of the same structure) reuse its compiled program; `None` for a fit closed over its
-    design."""
+    a fit that does not bake them in); `shared`: a hashable key of everything `fit`
+    depends on besides its arguments, so that a later study with an equal key reuses
+    its compiled program: for a fit taking its design as arguments the method alone
+    (other designs of the same size, or another robot of the same structure, share
+    it); for a fit closed over its design the method and the content of the robot and
+    the design; `None` to compile per study."""
 
     names: tuple[str, ...]
     true: np.ndarray
@@ -126,7 +129,7 @@ def trial_fit(
     state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
     probe = jax.eval_shape(lambda d: solver.fit(state, d), clean)
     names = tuple(probe.names)
-    inputs, shared = (), None
+    inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
     if method == "nonlinear" and len(configurations(q)[0]) == len(q):
         # The full model takes the robot and the angles as arguments: every design
         # with as many distinct rows shares one compiled study. (Repeated rows keep
@@ -144,6 +147,26 @@ def trial_fit(
         inputs,
         shared,
     )
+
+
+def _closed_key(solver: AbstractMethod, no_moments: bool, *closed) -> tuple | None:
+    # What a fit closed over its design depends on: the method, and the content of the
+    # robot and the design's angles and moments (structure, static fields included, and
+    # every array's bytes). Equal content finds the compiled study again in a later call
+    # (a notebook re-running a study); `None` (compile per call) if a static field is
+    # not hashable.
+    leaves, treedef = jax.tree.flatten(closed)
+    h = hashlib.sha256()
+    for x in leaves:
+        a = np.asarray(x)
+        h.update(f"{a.shape}{a.dtype}".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    key = ("closed", solver, no_moments, treedef, h.hexdigest())
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
 
 
 @functools.cache

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any
 
@@ -187,8 +188,10 @@ def prepare_study(robot, design, method, free, clean, noise_std):
     return tf, d0, sigma, method
 
 
-# Compiled chunks of fits that take their design as arguments (`TrialFit.shared`).
-_SHARED: dict = {}
+# Compiled chunks by `TrialFit.shared`, the most recently used kept: a program closed
+# over its design holds that design, so they are not kept without bound.
+_SHARED: OrderedDict = OrderedDict()
+_SHARED_MAX = 16
 
 
 def _shapes(args) -> tuple:
@@ -242,8 +245,9 @@ def run_study(
         sequential,
     )
     if tf.shared is not None:
-        # A fit that takes the design as arguments: one program per size, kept for
-        # every later study (the key holds the argument structure, shapes included).
+        # Kept for later studies with the same fit (`TrialFit.shared`: one program per
+        # design size for a fit taking the design as arguments; per robot and design
+        # for one closed over them); the key holds the argument structure and shapes.
         cache = _SHARED
         ckey = (tf.shared, *ckey, jax.tree.structure(args0), *_shapes(args0))
     t0 = time.perf_counter()
@@ -255,6 +259,10 @@ def run_study(
         # executable in JAX's cache.
         fn.lower(*args0).compile()
         cache[ckey] = fn
+        if cache is _SHARED and len(_SHARED) > _SHARED_MAX:
+            _SHARED.popitem(last=False)
+    elif cache is _SHARED:
+        _SHARED.move_to_end(ckey)
     compiled = cache[ckey]
     t_compile = time.perf_counter() - t0
 
