@@ -353,6 +353,10 @@ def test_sequential_chunk_equals_the_vmapped_one(robot, design):
     np.testing.assert_array_equal(np.asarray(a.ok), np.asarray(b.ok))
     std = np.asarray(a.nf_std)
     assert np.all(np.isfinite(std)) and np.all(std > 0)
+    # The noise-free fit (member 0 of the sequential map, a separate fit in the vmap).
+    assert bool(a.nf_ok) and bool(b.nf_ok)
+    assert np.all(np.abs(np.asarray(a.nf_est) - np.asarray(b.nf_est)) <= 1e-3 * std)
+    np.testing.assert_allclose(np.asarray(b.nf_std), std, rtol=1e-6)
     diff = np.abs(np.asarray(a.est) - np.asarray(b.est))[np.asarray(a.ok)]
     assert np.all(diff <= 1e-3 * std)
     np.testing.assert_array_equal(np.asarray(a.covered), np.asarray(b.covered))
