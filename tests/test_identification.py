@@ -374,3 +374,15 @@ def test_nonlinear_init_groups_rows_inside_a_trace(robot, example):
     # As the Monte-Carlo trial builds it: host arrays, inside the trace.
     traced = jax.eval_shape(lambda: method.init(robot, jaxcal.Dataset(q, f, m, None, s)))
     assert host.q_unique.shape == traced.q_unique.shape == (n_conf, 6)
+
+
+@pytest.mark.parametrize("free", [None, ("k2_urad_per_Nm", "k5_urad_per_Nm", "Kc_N_per_m")])
+def test_nonlinear_names_without_tracing_equal_the_fits(robot, example, free):
+    # `NonlinearMethod.names` reads the free parameters from its state instead of
+    # tracing the full model's fit (the base class's abstract evaluation).
+    method = jaxcal.NonlinearMethod(free)
+    state = method.init(robot, example[0])
+    d = jnp.asarray(example[0].deflection)
+    names = method.names(state, d)
+    assert names == jaxcal.AbstractMethod.names(method, state, d)
+    assert len(names) == (8 if free is None else 3)

@@ -26,6 +26,7 @@ import abc
 from typing import Any, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
@@ -78,6 +79,12 @@ class AbstractMethod(eqx.Module):
 
     @abc.abstractmethod
     def fit(self, state: Any, deflection: Float[Array, "n 3"]) -> IdentificationResult: ...
+
+    def names(self, state: Any, deflection: Float[Array, "n 3"]) -> tuple[str, ...]:
+        """The parameters `fit` estimates (names with units, in its order). They are
+        static: by default read from an abstract evaluation of `fit` (a trace, nothing
+        compiled); a method that knows them without tracing says so."""
+        return tuple(jax.eval_shape(lambda d: self.fit(state, d), deflection).names)
 
 
 class LinearMethod(AbstractMethod):
@@ -169,6 +176,11 @@ class NonlinearMethod(AbstractMethod):
             inverse=inv,
             mask=free_mask(robot, self.free),
         )
+
+    def names(self, state: NonlinearState, deflection: Float[Array, "n 3"]) -> tuple[str, ...]:
+        # The free parameters (`make_result`), without tracing the full model's fit
+        # (about 2 s of every nonlinear Monte-Carlo study).
+        return tuple(n for n, f in zip(state.robot.parameter_names, state.mask, strict=True) if f)
 
     def fit(self, state: NonlinearState, deflection: Float[Array, "n 3"]) -> IdentificationResult:
         moments = state.moment is not None

@@ -125,10 +125,8 @@ def trial_fit(
         data = Dataset(q, force, moment, None, sigma, design.ids, design.source)  # type: ignore[arg-type]
         return _from_result(solver.fit(solver.init(robot, data), d))
 
-    # The names are static: abstract evaluation gets them without compiling anything.
     state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
-    probe = jax.eval_shape(lambda d: solver.fit(state, d), clean)
-    names = tuple(probe.names)
+    names = solver.names(state, clean)
     inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
     if method == "nonlinear" and len(configurations(q)[0]) == len(q):
         # The full model takes the robot and the angles as arguments: every design
