@@ -127,7 +127,6 @@ def trial_fit(
 
     state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
     names = solver.names(state, clean)
-    inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
     if method == "nonlinear" and len(configurations(q)[0]) == len(q):
         # The full model takes the robot and the angles as arguments: every design
         # with as many distinct rows shares one compiled study. (Repeated rows keep
@@ -135,6 +134,8 @@ def trial_fit(
         # equilibrium once.)
         fit = _traced_design(solver, not no_moments)
         inputs, shared = (robot, jnp.asarray(q)), (solver, not no_moments)
+    else:
+        inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
     return TrialFit(
         names,
         true_values(robot, design, names),

@@ -216,8 +216,9 @@ def run_study(
     cache: dict | None = None,
 ) -> MonteCarloResult:
     """The study itself for a prepared per-trial fit `tf` (see `jaxcal.montecarlo._methods`),
-    noise-free deflections `d0` (m) and per-row noise σ (m). `cache` (a dict) keeps the
-    compiled functions between calls with the same `tf` (e.g. a sweep over σ)."""
+    noise-free deflections `d0` (m) and per-row noise σ (m). Compiled chunks are kept
+    by `tf.shared`; `cache` (a dict) keeps them between calls with the same `tf` (e.g. a
+    sweep over σ) only where `tf.shared` is `None`."""
     devices = list(jax.devices() if devices is None else devices)
     ndev = len(devices)
     chunk = _DEFAULT_CHUNK.get(method, 1024) if chunk is None else int(chunk)
