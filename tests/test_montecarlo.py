@@ -24,7 +24,13 @@ from hypothesis import given, settings, strategies as st
 
 import jaxcal
 from jaxcal import monte_carlo, trial_noise
-from jaxcal.internal import MomentAccumulator, TrialFit, run_study
+from jaxcal.internal import (
+    MomentAccumulator,
+    TrialFit,
+    normal_from_bits,
+    run_study,
+    standard_normal,
+)
 from jaxcal.internal.cli import main
 
 SIGMA = 2e-5  # m, the canonical tracker noise (0.02 mm)
@@ -189,6 +195,58 @@ def test_trial_noise_is_per_index_and_has_the_stated_std():
     t = np.asarray(jax.vmap(lambda i: trial_noise(key, i, sigma, 5.0))(idx)) / SIGMA
     assert abs(t.var() - 1) < 0.04
     assert np.mean(np.abs(t) > 4) > 5 * np.mean(np.abs(z) > 4)
+
+
+def test_normal_from_bits_is_the_inverse_normal_cdf_of_its_word():
+    """Every regime of the float32 quantile (central, Giles' tail, our far tail, both
+    signs, both ends of the 31-bit tail probability) against scipy's float64 erfcinv."""
+    import scipy.special
+
+    m = np.unique(
+        np.concatenate(
+            [
+                np.arange(200_000),
+                np.logspace(0, np.log10(2**31 - 1), 400_000).astype(np.int64),
+                2**31 - 1 - np.arange(200_000),
+            ]
+        )
+    )
+    exact = np.sqrt(2) * scipy.special.erfcinv((m + 0.5) * 2.0**-31)
+    draw = jax.jit(normal_from_bits)
+    for sign in (0, 1):
+        z = np.asarray(draw(jnp.asarray((m | (sign << 31)).astype(np.uint32))), np.float64)
+        want = exact * (1 - 2 * sign)
+        # float32 evaluation: a few ulps (6e-8 each) of relative error; absolute near 0.
+        assert np.all(np.abs(z - want) <= 4e-7 * np.maximum(np.abs(want), 0.5))
+        # The sign bit (below 1e-6 the float32 tail probability rounds to 1: z = 0).
+        big = np.abs(want) > 1e-6
+        assert np.all(np.sign(z[big]) == np.sign(want[big]))
+    assert abs(exact.max() - 6.3380) < 1e-3  # the resolution limit the docstring states
+
+
+def test_standard_normal_has_the_normal_distribution():
+    """One million variates (odd count: the last 64-bit draw is half used): the CDF at
+    ±1..4σ, the moments, and no correlation between the two words of one draw."""
+    from scipy.stats import norm
+
+    n = 1_000_001
+    z = np.asarray(jax.jit(lambda k: standard_normal(k, (n,)))(jax.random.key(12)))
+    assert z.dtype == np.float64 and z.shape == (n,)
+    # Deterministic in the key (another compiled program of the same draw).
+    again = jax.jit(lambda k: standard_normal(k, (n,)) * 1.0)(jax.random.key(12))
+    np.testing.assert_array_equal(np.asarray(again), z)
+    for t in (-4.0, -3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, 4.0):
+        p = norm.cdf(t)
+        # Binomial count of z ≤ t: 6 standard deviations (+1 count for the far tails).
+        assert abs(np.mean(z <= t) - p) <= 6 * np.sqrt(p * (1 - p) / n) + 1 / n, t
+    # Sample mean sd 1/√n, variance sd √(2/n), kurtosis sd √(24/n): 6 sd each.
+    assert abs(z.mean()) < 6 / np.sqrt(n)
+    assert abs(z.var() - 1) < 6 * np.sqrt(2 / n)
+    assert abs(np.mean(z**4) / np.mean(z**2) ** 2 - 3) < 6 * np.sqrt(24 / n)
+    # The high and low words of one Threefry draw make z[i] and z[i + n//2].
+    h = (n + 1) // 2
+    r = np.corrcoef(z[: n - h], z[h:])[0, 1]
+    assert abs(r) < 6 / np.sqrt(n - h)
 
 
 def test_failed_trials_are_counted_and_excluded():

@@ -49,5 +49,9 @@ from ..discrepancy._screening import (
 from ..discrepancy._supermodel import BatchFit as BatchFit
 from ..montecarlo._chunk import make_chunk_fn as make_chunk_fn
 from ..montecarlo._methods import TrialFit as TrialFit
+from ..montecarlo._noise import (
+    normal_from_bits as normal_from_bits,
+    standard_normal as standard_normal,
+)
 from ..montecarlo._stats import MomentAccumulator as MomentAccumulator
 from ..montecarlo._study import prepare_study as prepare_study, run_study as run_study

@@ -5,46 +5,22 @@ The trial axis is sharded over a device mesh; only the reductions communicate.""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-from jaxtyping import Array, Float
+from jaxtyping import Array
 
 from .._batching import batch_map
 from .._solution import NAMES, RESULTS, result_of
+from ._noise import trial_noise
 
-__all__ = ["ChunkOut", "REASONS", "make_chunk_fn", "trial_noise"]
+__all__ = ["ChunkOut", "REASONS", "make_chunk_fn"]
 
 #: The failure reasons a chunk counts, in the order of `ChunkOut.failures`.
 REASONS = NAMES[1:]
-
-
-def trial_noise(
-    key: Array,
-    index: Array,
-    sigma: Float[Array, " n"],
-    student_t: float | None = None,
-) -> Float[Array, "n 3"]:
-    """Noise (m) of trial `index` (global trial number, any non-negative integer):
-    `σ_row · z` with z standard normal, or Student-t with `student_t` = ν degrees of
-    freedom scaled to unit variance (ν > 2). The key of the trial is
-    `fold_in(fold_in(key, index // 2³²), index mod 2³²)`: independent of how trials are
-    chunked or sharded."""
-    index = jnp.asarray(index, jnp.int64)
-    hi = (index >> 32).astype(jnp.uint32)
-    lo = (index & 0xFFFFFFFF).astype(jnp.uint32)
-    k = jax.random.fold_in(jax.random.fold_in(key, hi), lo)
-    shape = (sigma.shape[0], 3)
-    if student_t is None:
-        z = jax.random.normal(k, shape, sigma.dtype)
-    else:
-        nu = float(student_t)
-        z = jax.random.t(k, nu, shape, sigma.dtype) * math.sqrt((nu - 2.0) / nu)
-    return z * sigma[:, None]
 
 
 class ChunkOut(NamedTuple):

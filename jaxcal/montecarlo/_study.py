@@ -17,7 +17,9 @@ gives the same statistics on one or many devices (to round-off of the in-chunk s
 **Noise.** Gaussian with standard deviation σ per coordinate (m), or Student-t with ν
 degrees of freedom *scaled to the same standard deviation σ* (requires ν > 2), so that
 a Gaussian and a heavy-tailed study are comparable at equal σ (the analytic standard
-errors apply to both; only the tails differ).
+errors apply to both; only the tails differ). The Gaussian variates spend 32 random
+bits each (twice as fast as `jax.random.normal` in float64, faster than numpy's
+generator): they reach 6.34σ at most and are exact to 3e-7 relative (`_noise.py`).
 """
 
 from __future__ import annotations
@@ -38,8 +40,9 @@ from .._identification.identify import METHODS
 from .._io import Dataset
 from .._model.simulate import DeflectionError, model_deflections
 from .._robot import Robot
-from ._chunk import REASONS, ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn, trial_noise
+from ._chunk import REASONS, ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn
 from ._methods import TrialFit, trial_fit
+from ._noise import trial_noise
 from ._stats import MomentAccumulator, MonteCarloResult
 
 __all__ = [
