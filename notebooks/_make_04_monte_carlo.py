@@ -235,11 +235,12 @@ cells = [
         "        print(f'default / {other:14s}' + '  '.join(f\"{n.split('_')[0]} {a:.2f}±{b:.2f}\" for n, a, b in zip(pn, r, s)))"
     ),
     md(
-        "Read with notebook 03's predictions: against the paper's plan the default design "
-        "is 2-5x more accurate on k3..k6, equal on Kc, and 4-5 % less accurate on k2 "
-        "(1.05 ± 0.03; the linearised covariance predicts 1.04); against the median random "
-        "design it is better on k2, k4, k5, k6, Kc and s0, and *worse on k3* (by ~15 %): "
-        "the trace criterion gives k3 0.07 % of its weight (k6: 85 %). s0's RMSE is "
+        "Read with notebook 03's predictions (the ratios of the linearised covariance): "
+        "against the paper's plan the default design is 2-5x more accurate on k3..k6, "
+        "equal on Kc, and equal on k2 within the error bars (predicted: 4 % less "
+        "accurate); against the median random design it is better on k2, k4, k5, k6, Kc "
+        "and s0, and *worse on k3* (predicted 1.16; the error bars are ±1 standard error "
+        "here): the trace criterion gives k3 0.07 % of its weight (k6: 85 %). s0's RMSE is "
         "dominated by a few far-off estimates (heavy tails), hence its wide error bars."
     ),
     code(
