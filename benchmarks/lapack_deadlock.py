@@ -17,9 +17,13 @@ Cases:
 - `eigh`: the smallest program of the kind: two independent batched `eigh` and two
   batched `solve` in one jit.
 
-`--load` runs a busy loop on every core beside the run ("under load"). If a jaxlib or
-an XLA flag gives 0 hangs in 40+ runs of both cases, `JAXCAL_LINALG=lineax` can become
-the default (`_linalg/solvers.py`).
+`--load` runs a busy loop on every core beside the run ("under load").
+
+jaxlib 0.10.2, 2 cores (2026-11-24; `benchmarks/README.md`): `eigh` hangs in 3 of 3
+runs, 9 of 10 under load; with `--xla-flags
+--xla_cpu_enable_concurrency_optimized_scheduler=false` in 0 of 40 under load. The
+`jaxcal` case no longer hangs either way (0 of 40 under load): its earlier hang was in
+`eigh`, which jaxcal's own Jacobi iteration replaces under both backends.
 """
 
 from __future__ import annotations
@@ -55,6 +59,7 @@ k = jax.random.split(jax.random.key(0), 4)
 A = jax.random.normal(k[0], (4096, 8, 8)); A = A @ A.mT + 8 * jnp.eye(8)
 B = jax.random.normal(k[1], (4096, 8, 8)); B = B @ B.mT + 8 * jnp.eye(8)
 b = jax.random.normal(k[2], (4096, 8))
+b = b[..., None]
 f = jax.jit(lambda A, B, b: (jnp.linalg.eigh(A)[0].sum() + jnp.linalg.eigh(B)[0].sum()
                              + jnp.linalg.solve(A, b).sum() + jnp.linalg.solve(B, b).sum()))
 for _ in range(20):

@@ -6,9 +6,15 @@ linear model's compliance) takes its solver from here.
 Default `"dense"`: on the CPU, batched LAPACK kernels can deadlock XLA's thread pool
 (see `dense.py`), and the matrices are tiny. Set the environment variable
 `JAXCAL_LINALG=lineax` before importing jaxcal to use lineax's solvers instead: on an
-accelerator, or once a jaxlib without the deadlock is in use (check with the repro in
-`dense.py` under load before trusting it on a CPU). Both give the same answers to
-round-off (`tests/test_linalg_switch.py`).
+accelerator, or on a CPU with a jaxlib that passes `benchmarks/lapack_deadlock.py`.
+Both give the same answers to round-off (`tests/test_linalg_switch.py`).
+
+jaxlib 0.10.2 still deadlocks (that script's `eigh` case hangs in every run). The XLA
+flag `--xla_cpu_enable_concurrency_optimized_scheduler=false` avoids it (0 hangs in 40
+runs under load), so with `JAXCAL_LINALG=lineax` on a CPU also set
+`XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=false`. It stays a user's
+choice, not the default: the flag is read once, from the environment, when JAX starts,
+which a library cannot arrange for the programs that import it.
 """
 
 from __future__ import annotations
