@@ -22,6 +22,14 @@ from ._identification.calibration import (
     read_calibration as read_calibration,
     save_robot as save_robot,
 )
+from ._identification.elastogeometric import (
+    Stage as Stage,
+    TreeCalibration as TreeCalibration,
+    calibrate_tree as calibrate_tree,
+    marker_errors as marker_errors,
+    predicted_markers as predicted_markers,
+    validate_tree as validate_tree,
+)
 from ._identification.identify import (
     identify as identify,
 )
@@ -45,6 +53,11 @@ from ._identification.methods import (
     linear_system as linear_system,
     solve_linear as solve_linear,
 )
+from ._identification.parameter_groups import (
+    PARAMETER_GROUPS as PARAMETER_GROUPS,
+    Parameter as Parameter,
+    parameter_table as parameter_table,
+)
 from ._identification.two_step import (
     TwoStepSystem as TwoStepSystem,
     solve_two_step as solve_two_step,
@@ -57,6 +70,11 @@ from ._io import (
     q2_groups as q2_groups,
     read_dataset as read_dataset,
     write_dataset as write_dataset,
+)
+from ._markers import (
+    MarkerData as MarkerData,
+    read_markers as read_markers,
+    write_markers as write_markers,
 )
 from ._model.candidates import (
     Backlash as Backlash,
@@ -109,6 +127,20 @@ from ._model.simulate import (
     DeflectionError as DeflectionError,
     model_deflections as model_deflections,
     simulate as simulate,
+)
+from ._model.tree import (
+    TREE_PRESETS as TREE_PRESETS,
+    TreeRobot as TreeRobot,
+    load_tree as load_tree,
+    tree_from_dict as tree_from_dict,
+    tree_to_dict as tree_to_dict,
+)
+from ._model.tree_statics import (
+    TreeEquilibrium as TreeEquilibrium,
+    element_frames as element_frames,
+    marker_positions as marker_positions,
+    predict_markers as predict_markers,
+    tree_equilibrium as tree_equilibrium,
 )
 from ._parameters import (
     get_parameters as get_parameters,

@@ -32,6 +32,8 @@ __all__ = [
     "DataError",
     "configurations",
     "q2_groups",
+    "read_rows",
+    "finite_number",
 ]
 
 Q_COLS = tuple(f"q{i}_deg" for i in range(1, 7))
@@ -145,7 +147,7 @@ def q2_groups(q2: Float[Array, " n"], decimals: int = 6) -> tuple[np.ndarray, np
     return np.deg2rad(values), index
 
 
-def _parse(value: str) -> float | None:
+def finite_number(value: str) -> float | None:
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -172,6 +174,30 @@ def _check_dialect(path: Path, rows: list[list[str]]) -> None:
                 )
 
 
+def read_rows(path: str | Path) -> list[list[str]]:
+    """The rows of a CSV file as text cells, header first, after the checks every data
+    file gets (readable UTF-8, not empty, comma-separated, no comment lines); raises
+    `DataError` naming the file."""
+    path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path}: is a directory, not a CSV file")
+    try:
+        # utf-8-sig: spreadsheet programs start a UTF-8 CSV with a byte-order mark.
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+    except UnicodeDecodeError as e:
+        raise DataError(
+            f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
+            "save it as UTF-8 (e.g. 'CSV UTF-8' in a spreadsheet program)"
+        ) from None
+    except OSError as e:
+        raise DataError(f"{path}: cannot read: {e.strerror}") from None
+    if not rows:
+        raise DataError(f"{path}: empty file (a header row is required)")
+    _check_dialect(path, rows)
+    return rows
+
+
 def read_dataset(
     path: str | Path,
     robot: Robot | None = None,
@@ -194,22 +220,7 @@ def read_dataset(
     Raises `DataError` listing every problem as `file, row R (line L), column C: ...`.
     """
     path = Path(path)
-    if path.is_dir():
-        raise DataError(f"{path}: is a directory, not a CSV file")
-    try:
-        # utf-8-sig: spreadsheet programs start a UTF-8 CSV with a byte-order mark.
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
-    except UnicodeDecodeError as e:
-        raise DataError(
-            f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
-            "save it as UTF-8 (e.g. 'CSV UTF-8' in a spreadsheet program)"
-        ) from None
-    except OSError as e:
-        raise DataError(f"{path}: cannot read: {e.strerror}") from None
-    if not rows:
-        raise DataError(f"{path}: empty file (a header row is required)")
-    _check_dialect(path, rows)
+    rows = read_rows(path)
     header = [h.strip() for h in rows[0]]
     problems: list[str] = []
     known = set(Q_COLS + F_COLS + M_COLS + D_COLS + OPTIONAL)
@@ -248,7 +259,7 @@ def read_dataset(
             problems.append(f"{where}: has {len(row)} fields, header has {len(header)}")
             continue
         for j, c in enumerate(numeric):
-            v = _parse(row[col[c]].strip())
+            v = finite_number(row[col[c]].strip())
             if v is None:
                 problems.append(f"{where}, column {c}: {row[col[c]]!r} is not a finite number")
                 continue

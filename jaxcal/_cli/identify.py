@@ -61,6 +61,14 @@ def register(sub) -> None:
         help="write the robot file with the identified parameters and a 'calibration' block "
         "(method, date, data file and hash, std, covariance, chi2); load it with --robot",
     )
+    p.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="robots given as a kinematic tree (absolute marker data): comma-separated "
+        "parameter groups to fit, of frames,joint-offsets,dh,joint-compliance,"
+        "lateral-compliance (default: every group the data determine)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -68,8 +76,13 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._identification.identify import identify
     from .._io import read_dataset
+    from .._model.tree import is_tree_file
     from .._robot import load_robot
 
+    if is_tree_file(args.robot):
+        from .validate import identify_tree
+
+        return identify_tree(args)
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
     check_output_path(args.save_robot, "--save-robot")

@@ -24,6 +24,7 @@ COMMANDS = (
     "demo",
     "simulate",
     "identify",
+    "validate",
     "montecarlo",
     "design",
     "discover",

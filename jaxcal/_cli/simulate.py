@@ -44,8 +44,13 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
     from .._model.simulate import simulate
+    from .._model.tree import is_tree_file
     from .._robot import load_robot
 
+    if is_tree_file(args.robot):
+        from .validate import simulate_tree
+
+        return simulate_tree(args)
     check_output_path(args.output, "-o")
     if args.noise_mm is not None and args.noise_mm < 0:
         raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")

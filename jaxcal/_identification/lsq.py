@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._linalg.covariance import covariance_from_jacobian
+from .._linalg.covariance import covariance_from_jacobian, masked_covariance
 from .._linalg.solvers import qr_solver
 from .._solution import RESULTS, result_of
 
@@ -130,6 +130,8 @@ def nonlinear_fit(
     *,
     scale: Float[Array, " P"] | None = None,
     free: tuple[bool, ...] | None = None,
+    mask: Float[Array, " P"] | None = None,
+    jacobian: Callable[[Float[Array, " P"]], tuple[Array, Array, Array]] | None = None,
     loss: str = "l2",
     huber_delta: float = 1.5,
     max_steps: int = 32,
@@ -152,6 +154,13 @@ def nonlinear_fit(
       the solver works in `y = (p − p0)/scale`, O(1), which makes its tolerances
       (`rtol`, `atol`) relative to the scale.
     - `free`: static tuple of bools, which parameters are fitted (default all).
+    - `mask`: optional `(P,)` array of 0/1, a traced subset of `free` to fit; the others
+      are held at `p0` (zero covariance). Unlike `free` it does not change the program:
+      fits that differ only in their mask share one compilation.
+    - `jacobian(p)`: optional `(prediction (n, 3), ok, ∂prediction/∂p (n, 3, P))` in one
+      call, for a model that computes its Jacobian more cheaply than by one forward
+      pass per parameter (e.g. by reverse mode, row by row, when P is large and each row
+      has few outputs). `predict` is then not called.
     - `loss`: `"l2"` or `"huber"` (residual transform `huber_transform` with threshold
       `huber_delta` in units of σ; covariance then uses the IRLS weights).
     - `max_steps`: LM step budget (fits that hit it are flagged, not raised).
@@ -182,8 +191,11 @@ def nonlinear_fit(
     sig = jnp.asarray(sigma, p0.dtype)[:, None]
     target = jnp.asarray(target, p0.dtype)
 
+    m_free = None if mask is None else jnp.asarray(mask, p0.dtype)[idx]
+
     def params(y):
-        return p0.at[idx].add(s_free * y)
+        step = s_free * y if m_free is None else s_free * y * m_free
+        return p0.at[idx].add(step)
 
     def weighted(y):
         pred, ok = _split(predict(params(y)))
@@ -194,9 +206,16 @@ def nonlinear_fit(
         JVP per free parameter): the σ-weighted residual `r` and its Jacobian `J`, the
         loss-transformed residual and Jacobian that LM works on, the prediction and
         the model's ok flag."""
-        r, J, (pred, ok) = jax.vmap(
-            lambda e: jax.jvp(weighted, (y,), (e,), has_aux=True), out_axes=(None, 1, None)
-        )(jnp.eye(y.shape[0], dtype=y.dtype))
+        if jacobian is None:
+            r, J, (pred, ok) = jax.vmap(
+                lambda e: jax.jvp(weighted, (y,), (e,), has_aux=True), out_axes=(None, 1, None)
+            )(jnp.eye(y.shape[0], dtype=y.dtype))
+        else:
+            pred, ok, Jp = jacobian(params(y))
+            ok = jnp.all(ok)
+            r = ((target - pred) / sig).reshape(-1)
+            step = s_free if m_free is None else s_free * m_free
+            J = -(Jp[..., idx] * step / sig[..., None]).reshape(r.shape[0], -1)
         if loss == "huber":
             rt, Jt = jax.vmap(
                 lambda c: jax.jvp(lambda v: huber_transform(v, huber_delta), (r,), (c,)),
@@ -247,7 +266,12 @@ def nonlinear_fit(
     ok = okf > 0.5
     res = target - pred
     w = huber_weights(r, huber_delta) if loss == "huber" else None
-    cov_y, well = covariance_from_jacobian(J, w)
+    if m_free is None:
+        cov_y, well = covariance_from_jacobian(J, w)
+    else:
+        Jw = J if w is None else J * jnp.sqrt(w)[:, None]
+        cov_y, well = masked_covariance(Jw, m_free)
+        cov_y = cov_y * (m_free[:, None] * m_free[None, :])
     cov_free = cov_y * (s_free[:, None] * s_free[None, :])
     cov = jnp.zeros((P, P), p0.dtype).at[idx[:, None], idx[None, :]].set(cov_free)
     finite = jnp.all(jnp.isfinite(res)) & jnp.all(jnp.isfinite(p))

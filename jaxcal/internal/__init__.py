@@ -10,10 +10,18 @@ from .._exported import (
     exported as exported,
     set_export_directory as set_export_directory,
 )
+from .._identification.elastogeometric import (
+    pivoted_subset as pivoted_subset,
+    split_rows as split_rows,
+)
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
 from .._identification.method import fit_jit as fit_jit
 from .._identification.methods import (
     full_model_predictor as full_model_predictor,
+)
+from .._identification.parameter_groups import (
+    get_vector as get_vector,
+    set_vector as set_vector,
 )
 from .._identification.result import make_result as make_result
 from .._linalg import dense as dense
@@ -28,6 +36,7 @@ from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
 from .._model.simulate import batch_deflections as batch_deflections
+from .._model.tree_statics import gravity_potential as gravity_potential
 from .._robot import URAD as URAD, G as G
 from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._path import compensate_rows as compensate_rows

@@ -1,0 +1,261 @@
+"""`jaxcal validate`, and `identify`/`simulate` for a robot given as a kinematic tree
+with absolute marker measurements: calibrate on some rows, report the 3-D marker error
+on the others, per parameter group added in turn (the layout of published calibration
+tables)."""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+
+import equinox as eqx
+import numpy as np
+
+from .main import add_robot_argument, check_output_path, fix_names, print_json, seed
+
+#: The published Agile Justin results (held-out TCP error, mm: mean, std, max) per
+#: stage: Tenhumberg & Bäuml, Humanoids 2021, table "Calibration results".
+PUBLISHED = {
+    "dlr_agile_justin": {
+        "frames": (21.33, 9.71, 63.41),
+        "joint-offsets": (18.18, 7.80, 45.9),
+        "dh": (10.5, 5.74, 36.37),
+        "joint-compliance": (5.64, 2.57, 12.83),
+        "lateral-compliance": (3.12, 1.71, 8.23),
+    }
+}
+
+
+def register(sub) -> None:
+    from .._identification.parameter_groups import GROUPS
+
+    p = sub.add_parser(
+        "validate",
+        help="calibrate on part of an absolute-measurement file, report held-out errors",
+        description=(
+            "Hold out --test rows (drawn by --seed), calibrate the robot on the others "
+            "adding the parameter groups in turn (" + ", ".join(GROUPS) + "), and print the "
+            "mean, std and max 3-D marker error (mm) on the held-out rows after each; with "
+            "--folds K, K disjoint test sets instead. For Agile Justin the published "
+            "figures are printed beside."
+        ),
+    )
+    p.add_argument(
+        "data", metavar="DATA.csv", help="absolute marker measurements (q*_deg, M_x_mm..)"
+    )
+    add_robot_argument(p)
+    p.add_argument("--test", type=int, default=200, metavar="N", help="held-out rows (default 200)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the held-out draw (default 0)")
+    p.add_argument(
+        "--folds", type=int, default=None, metavar="K", help="K-fold validation instead of --test"
+    )
+    p.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="comma-separated groups to add, in the order " + ",".join(GROUPS) + " (default all)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def _load(args):
+    from .._markers import read_markers
+    from .._model.tree import load_tree
+
+    robot = load_tree(args.robot)
+    return robot, read_markers(args.data, robot)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .._format import format_table
+    from .._identification.elastogeometric import split_rows, validate_tree
+    from .._identification.parameter_groups import parse_groups
+
+    groups = parse_groups(args.params)
+    robot, data = _load(args)
+    n = len(data)
+    if args.folds is not None:
+        if not 2 <= args.folds <= n:
+            raise ValueError(f"--folds must be between 2 and {n}, got {args.folds}")
+        perm = np.random.default_rng(args.seed).permutation(n)
+        splits = [
+            (np.sort(np.setdiff1d(perm, f)), np.sort(f)) for f in np.array_split(perm, args.folds)
+        ]
+    else:
+        splits = [split_rows(n, args.test, args.seed)]
+
+    def progress(s):
+        print(
+            f"  + {s.groups[-1]}: held-out mean {s.mean_mm:.2f} mm ({s.seconds:.1f} s)",
+            file=sys.stderr,
+        )
+
+    folds = []
+    for k, (train, test) in enumerate(splits):
+        print(
+            f"fold {k + 1}/{len(splits)}: calibrating on {len(train)} rows, testing on "
+            f"{len(test)}...",
+            file=sys.stderr,
+        )
+        folds.append(
+            validate_tree(robot, data.subset(train), data.subset(test), groups, progress=progress)
+        )
+    published = PUBLISHED.get(robot.name, {})
+    stages = []
+    for i, g in enumerate(groups):
+        rows = [f[i] for f in folds]
+        stages.append(
+            {
+                "added": g,
+                "mean_mm": float(np.mean([s.mean_mm for s in rows])),
+                "std_mm": float(np.mean([s.std_mm for s in rows])),
+                "max_mm": float(np.max([s.max_mm for s in rows])),
+                "train_rms_mm": float(np.mean([s.train_rms_mm for s in rows])),
+                "fitted": int(rows[0].fitted),
+                "converged": all(s.converged for s in rows),
+                "published_mm": list(published[g]) if g in published else None,
+            }
+        )
+    if args.json:
+        print_json(
+            {
+                "robot": robot.name,
+                "data": args.data,
+                "rows": n,
+                "folds": len(splits),
+                "test_rows": [int(len(t)) for _, t in splits],
+                "seed": args.seed,
+                "stages": stages,
+            }
+        )
+        return 0 if all(s["converged"] for s in stages) else 1
+    head = ["+ group", "mean mm", "std mm", "max mm", "train rms mm", "fitted", "converged"]
+    if published:
+        head += ["published mean/std/max"]
+    table = []
+    for s in stages:
+        row = [
+            s["added"],
+            s["mean_mm"],
+            s["std_mm"],
+            s["max_mm"],
+            s["train_rms_mm"],
+            s["fitted"],
+            "yes" if s["converged"] else "NO",
+        ]
+        if published:
+            pub = s["published_mm"]
+            row.append("/".join(f"{v:g}" for v in pub) if pub else "")
+        table.append(row)
+    what = f"{len(splits)} folds" if len(splits) > 1 else f"{len(splits[0][1])} held-out rows"
+    print(f"{robot.name}: {n} rows, {what} (seed {args.seed}); 3-D marker error on held-out rows")
+    print(
+        format_table(head, [[round(v, 2) if isinstance(v, float) else v for v in r] for r in table])
+    )
+    return 0 if all(s["converged"] for s in stages) else 1
+
+
+def identify_tree(args: argparse.Namespace) -> int:
+    """`jaxcal identify` for a tree robot: the full calibration (or `--params` groups)."""
+    from .._format import format_table
+    from .._identification.elastogeometric import calibrate_tree
+    from .._identification.parameter_groups import parse_groups
+    from .._io import atomic_file
+    from .._model.tree import tree_to_dict
+
+    check_output_path(args.save_robot, "--save-robot")
+    groups = parse_groups(getattr(args, "params", None))
+    robot, data = _load(args)
+    print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
+    cal = calibrate_tree(robot, data, groups, hold=tuple(fix_names(args.fix)))
+    params = []
+    for p, f, v, s in zip(cal.table, cal.fitted, cal.estimate, cal.std, strict=True):
+        if f:
+            params.append(
+                {
+                    "name": p.name,
+                    "group": p.group,
+                    "value": float(v * p.factor),
+                    "std": float(s * p.factor),
+                    "unit": p.unit,
+                }
+            )
+    saved = None
+    if args.save_robot and cal.converged:
+        d = tree_to_dict(cal.robot)
+        d["calibration"] = {
+            "date": datetime.date.today().isoformat(),
+            "data": str(args.data),
+            "rows": len(data),
+            "groups": list(groups),
+            "rms_mm": cal.rms_mm,
+            "parameters": params,
+            "held": list(cal.held),
+        }
+        with atomic_file(args.save_robot) as fh:
+            json.dump(d, fh, indent=1, ensure_ascii=False)
+        saved = args.save_robot
+    summary = {
+        "robot": robot.name,
+        "data": args.data,
+        "rows": len(data),
+        "groups": list(groups),
+        "converged": cal.converged,
+        "message": cal.message,
+        "rms_mm": cal.rms_mm,
+        "chi2": cal.chi2,
+        "dof": cal.dof,
+        "seconds": cal.seconds,
+        "parameters": params,
+        "held": list(cal.held),
+        "saved_robot": saved,
+    }
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            format_table(
+                ["parameter", "group", "estimate", "std", "unit"],
+                [[p["name"], p["group"], p["value"], p["std"], p["unit"]] for p in params],
+            )
+        )
+        print(
+            f"\n{len(params)} parameters fitted; held at the robot file's values (not "
+            f"determined by these data, or redundant): {', '.join(cal.held) or 'none'}"
+        )
+        print(
+            f"RMS 3-D marker error {cal.rms_mm:.3f} mm over {len(data)} rows; "
+            f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"
+        )
+        if saved:
+            print(f"calibrated robot written to {saved} (use it with --robot {saved})")
+    if not cal.converged:
+        print(f"jaxcal identify: error: {cal.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def simulate_tree(args: argparse.Namespace) -> int:
+    """`jaxcal simulate` for a tree robot: the model's marker positions at the file's poses."""
+    from .._identification.elastogeometric import predicted_markers
+    from .._markers import read_markers, write_markers
+    from .._model.tree import load_tree
+
+    check_output_path(args.output, "-o")
+    robot = load_tree(args.robot)
+    data = read_markers(args.data, robot, require_markers=False)
+    y, ok = predicted_markers(robot, data)
+    if not ok.all():
+        raise ValueError(f"the equilibrium did not converge at rows {np.flatnonzero(~ok) + 1}")
+    if args.noise_mm is not None:
+        if args.noise_mm < 0:
+            raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")
+        y = y + np.random.default_rng(args.seed).normal(size=y.shape) * args.noise_mm * 1e-3
+        data = eqx.tree_at(lambda d: d.sigma, data, np.full(len(data), args.noise_mm * 1e-3))
+    write_markers(args.output or sys.stdout, data, robot, y)
+    if args.output:
+        print(f"wrote {len(data)} rows to {args.output}", file=sys.stderr)
+    return 0

@@ -1,0 +1,307 @@
+"""Elasto-geometric calibration of a `TreeRobot` from absolute marker measurements.
+
+The measurement frame, the marker offsets, the DH errors and the spring compliances
+are fitted jointly by Levenberg–Marquardt through the static equilibrium under the
+robot's own weight (`nonlinear_fit`). Which of them the data determine is decided from
+the data: QR with column pivoting of the σ-weighted Jacobian at the start (as FIGAROH
+does), each column scaled to the parameter's typical size; the columns it does not
+pick are named and held at the robot file's values.
+
+Every fit of one robot and one data shape shares one compiled program: the fitted
+subset is a traced mask over the full parameter table, not a static choice.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._markers import MarkerData
+from .._model.tree import TreeRobot
+from .._model.tree_statics import marker_positions, predict_markers
+from .._solution import RESULTS, messages
+from .lsq import LsqFit, nonlinear_fit
+from .parameter_groups import GROUPS, Parameter, get_vector, parameter_table, set_vector
+
+__all__ = [
+    "TreeCalibration",
+    "Stage",
+    "pivoted_subset",
+    "calibrate_tree",
+    "validate_tree",
+    "split_rows",
+    "marker_errors",
+    "predicted_markers",
+    "observations",
+]
+
+#: A pivoted column is kept while its R diagonal exceeds this fraction of the first's
+#: (columns scaled to their parameter's typical size): a condition number of the fitted
+#: block of at most ~1e4.
+PIVOT_RCOND = 1e-4
+
+
+def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
+    """Row and marker index of every seen marker (host-side)."""
+    rows, markers = np.nonzero(np.asarray(data.seen))
+    return rows, markers
+
+
+def _predict(robot: TreeRobot, table, p, q, rows, markers):
+    r = set_vector(robot, table, p)
+    y, ok = jax.vmap(predict_markers, in_axes=(None, 0))(r, q)
+    return y[rows, markers], ok
+
+
+@eqx.filter_jit
+def _weighted_jacobian(robot, table, q, rows, markers, sigma, scale):
+    _, _, J = _jacobian(robot, table, get_vector(robot, table), q, rows, markers)
+    return (J * scale / sigma[:, None, None]).reshape(-1, scale.shape[0])
+
+
+def pivoted_subset(
+    J: np.ndarray, rcond: float = PIVOT_RCOND, *, normalise: bool = False
+) -> np.ndarray:
+    """Host-side: `(q,)` bools, the columns of `J` `(m, q)` that QR with column pivoting
+    picks before the remaining columns' residual norm falls below `rcond` times the first
+    pick's (greedy modified Gram–Schmidt; exact redundancies and dead columns are left
+    out). The caller scales the columns (`calibrate_tree`: to each parameter's typical
+    size, so that a parameter whose typical change moves the markers by far less than
+    the noise is not fitted); `normalise` tests linear independence alone instead (unit
+    columns; on Agile Justin it frees more springs and the fit converges more slowly)."""
+    A = np.array(J, np.float64)
+    A[~np.isfinite(A)] = 0.0
+    if normalise:
+        # Identifiability is linear independence, not size: unit columns (a column
+        # with no sensitivity stays zero and is never picked).
+        n = np.linalg.norm(A, axis=0)
+        live = n > 1e-12 * max(float(n.max(initial=0.0)), 1e-300)
+        A = np.where(live, A / np.where(live, n, 1.0), 0.0)
+    q = A.shape[1]
+    chosen = np.zeros(q, bool)
+    norms = np.linalg.norm(A, axis=0)
+    first = None
+    for _ in range(min(A.shape)):
+        norms = np.where(chosen, -1.0, np.linalg.norm(A, axis=0))
+        k = int(np.argmax(norms))
+        if first is None:
+            first = norms[k]
+        if first <= 0 or norms[k] <= rcond * first:
+            break
+        chosen[k] = True
+        v = A[:, k] / norms[k]
+        A -= np.outer(v, v @ A)
+    return chosen
+
+
+class TreeCalibration(NamedTuple):
+    """An elasto-geometric calibration.
+
+    - `robot`: the calibrated robot (fitted parameters set, held ones as given).
+    - `table`: the parameters considered; `fitted`: which the data determined and were
+      fitted (`held`: the names of the others).
+    - `estimate`, `std`: `(P,)` SI values and standard deviations (0 where held).
+    - `rms_mm`: RMS 3-D marker error on the data, mm; `chi2`, `dof`.
+    - `fit`: the raw `LsqFit`; `seconds`: wall time.
+    """
+
+    robot: TreeRobot
+    table: tuple[Parameter, ...]
+    fitted: np.ndarray
+    estimate: np.ndarray
+    std: np.ndarray
+    rms_mm: float
+    chi2: float
+    dof: int
+    converged: bool
+    message: str
+    fit: LsqFit
+    seconds: float
+
+    @property
+    def held(self) -> tuple[str, ...]:
+        return tuple(p.name for p, f in zip(self.table, self.fitted, strict=True) if not f)
+
+
+def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
+    """Predictions, ok flags and their Jacobian in `p`, by reverse mode pose by pose: a
+    pose has 3k outputs against P ~ 100 parameters, and the equilibrium's adjoint is one
+    solve per output."""
+
+    def pose(p, q):
+        y, ok = predict_markers(set_vector(robot, table, p), q)
+        return y, (y, ok)
+
+    J, (y, ok) = jax.vmap(jax.jacrev(pose, has_aux=True), in_axes=(None, 0))(p, q)
+    return y[rows, markers], ok, J[rows, markers]
+
+
+@eqx.filter_jit
+def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
+    p0 = get_vector(robot, table)
+    return nonlinear_fit(
+        lambda p: _predict(robot, table, p, q, rows, markers),
+        p0,
+        target,
+        sigma,
+        scale=scale,
+        mask=mask,
+        jacobian=lambda p: _jacobian(robot, table, p, q, rows, markers),
+        max_steps=max_steps,
+        # In units of each parameter's typical size (1 mm, 1 mrad, 10 µrad/(N·m)).
+        rtol=1e-6,
+        atol=1e-6,
+    )
+
+
+def calibrate_tree(
+    robot: TreeRobot,
+    data: MarkerData,
+    groups: tuple[str, ...] = GROUPS,
+    *,
+    fit_groups: tuple[str, ...] | None = None,
+    hold: tuple[str, ...] = (),
+    max_steps: int = 100,
+    rcond: float = PIVOT_RCOND,
+) -> TreeCalibration:
+    """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
+    `groups`) that the data determine, starting from the robot's values.
+
+    `groups` is the parameter table the program is built for (keep it the same across
+    fits to share one compilation); `hold` names parameters to hold in any case. Never
+    raises on a failed fit: see `converged` and `message`.
+    """
+    if data.markers is None:
+        raise ValueError("data: no marker measurements to calibrate on")
+    t0 = time.perf_counter()
+    fit_groups = groups if fit_groups is None else fit_groups
+    table = parameter_table(robot, groups)
+    names = {p.name for p in table}
+    unknown = [h for h in hold if h not in names]
+    if unknown:
+        raise ValueError(f"hold: unknown parameter(s) {unknown}")
+    rows, markers = observations(data)
+    q = jnp.asarray(data.q)
+    sigma = jnp.asarray(np.asarray(data.sigma)[rows])
+    target = jnp.asarray(np.asarray(data.markers)[rows, markers])
+    scale = jnp.asarray([p.scale for p in table])
+    want = np.array([p.group in fit_groups and p.name not in hold for p in table])
+    J = np.asarray(_weighted_jacobian(robot, table, q, rows, markers, sigma, scale))
+    fitted = np.zeros(len(table), bool)
+    fitted[want] = pivoted_subset(J[:, want], rcond)
+    fit = _fit(
+        robot,
+        table,
+        jnp.asarray(fitted, q.dtype),
+        q,
+        rows,
+        markers,
+        target,
+        sigma,
+        scale,
+        max_steps,
+    )
+    est = np.asarray(fit.estimate)
+    std = np.sqrt(np.clip(np.diag(np.asarray(fit.covariance)), 0.0, None))
+    res = np.asarray(fit.residuals)
+    err = np.linalg.norm(res, axis=-1)
+    converged = bool(fit.result == RESULTS.successful)
+    return TreeCalibration(
+        robot=set_vector(robot, table, jnp.asarray(est)),
+        table=table,
+        fitted=fitted,
+        estimate=est,
+        std=std,
+        rms_mm=float(np.sqrt(np.mean(err**2)) * 1e3),
+        chi2=float(fit.chi2),
+        dof=int(res.size - fitted.sum()),
+        converged=converged,
+        message="" if converged else messages(fit.result)[0],
+        fit=fit,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+@eqx.filter_jit
+def _markers_of(robot: TreeRobot, q: Float[Array, "n N"]):
+    return jax.vmap(predict_markers, in_axes=(None, 0))(robot, q)
+
+
+def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
+    """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, and
+    `(n,)` whether each equilibrium converged."""
+    y, ok = _markers_of(robot, jnp.asarray(data.q))
+    return np.asarray(y), np.asarray(ok)
+
+
+def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
+    """3-D error (m) of every seen marker, measured − model, in `observations` order."""
+    y, _ = predicted_markers(robot, data)
+    rows, markers = observations(data)
+    return np.linalg.norm(np.asarray(data.markers)[rows, markers] - y[rows, markers], axis=-1)
+
+
+def rigid_markers(robot: TreeRobot, q) -> Array:
+    """Marker positions of the rigid robot (no springs), for comparison."""
+    return jax.vmap(marker_positions, in_axes=(None, 0))(robot, jnp.asarray(q))
+
+
+class Stage(NamedTuple):
+    """One row of a validation table: the groups fitted so far, and the held-out 3-D
+    marker errors (mm) after fitting them."""
+
+    groups: tuple[str, ...]
+    mean_mm: float
+    std_mm: float
+    max_mm: float
+    train_rms_mm: float
+    fitted: int
+    converged: bool
+    seconds: float
+
+
+def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Training and test row indices (sorted): `test` rows drawn at random by `seed`."""
+    if not 0 < test < n:
+        raise ValueError(f"test must be between 1 and {n - 1} rows, got {test}")
+    perm = np.random.default_rng(seed).permutation(n)
+    return np.sort(perm[test:]), np.sort(perm[:test])
+
+
+def validate_tree(
+    robot: TreeRobot,
+    train: MarkerData,
+    test: MarkerData,
+    groups: tuple[str, ...] = GROUPS,
+    *,
+    progress=None,
+) -> list[Stage]:
+    """Calibrate on `train` adding the parameter `groups` in turn (each stage starts
+    from the previous one's estimate) and measure the 3-D marker error on `test`."""
+    out: list[Stage] = []
+    current = robot
+    for k in range(1, len(groups) + 1):
+        cal = calibrate_tree(current, train, groups, fit_groups=groups[:k])
+        e = marker_errors(cal.robot, test) * 1e3
+        out.append(
+            Stage(
+                groups=groups[:k],
+                mean_mm=float(e.mean()),
+                std_mm=float(e.std()),
+                max_mm=float(e.max()),
+                train_rms_mm=cal.rms_mm,
+                fitted=int(cal.fitted.sum()),
+                converged=cal.converged,
+                seconds=cal.seconds,
+            )
+        )
+        current = cal.robot
+        if progress is not None:
+            progress(out[-1])
+    return out

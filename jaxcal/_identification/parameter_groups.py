@@ -1,0 +1,163 @@
+"""The elasto-geometric parameters of a `TreeRobot`, by group, as one flat vector.
+
+A parameter is a named entry of one of the robot's array fields; the table built here
+is the one place that knows where each lives, its unit and its typical size, so that
+reading (`get_vector`) and writing (`set_vector`) a robot are inverses and every
+printed name is the same.
+
+Groups, in the order a calibration adds them:
+
+- `frames`: the base's pose in the measurement frame (6) and each marker's offset (3);
+- `joint-offsets`: θ of each moving element;
+- `dh`: d, a, α of each moving element;
+- `joint-compliance`: the spring about each joint axis, κθ;
+- `lateral-compliance`: the two springs about the perpendicular axes, κα, κβ.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._model.tree import TreeRobot
+
+__all__ = [
+    "GROUPS",
+    "PARAMETER_GROUPS",
+    "Parameter",
+    "parameter_table",
+    "get_vector",
+    "set_vector",
+    "parse_groups",
+]
+
+GROUPS: tuple[str, ...] = (
+    "frames",
+    "joint-offsets",
+    "dh",
+    "joint-compliance",
+    "lateral-compliance",
+)
+#: The public name of `GROUPS`.
+PARAMETER_GROUPS = GROUPS
+
+
+class Parameter(NamedTuple):
+    """One identifiable number: `name`, `group`, where it lives (`field`, `index` into
+    that array field), `unit` as printed, `factor` from SI to that unit, and `scale`:
+    its typical change in SI (the solver works in units of it)."""
+
+    name: str
+    group: str
+    field: str
+    index: tuple[int, ...]
+    unit: str
+    factor: float
+    scale: float
+
+
+_MM, _MRAD, _COMP = 1e-3, 1e-3, 1e-5  # typical sizes: m, rad, rad/(N·m)
+
+
+def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple[Parameter, ...]:
+    """Every parameter of `groups` (`GROUPS` order), in vector order."""
+    unknown = [g for g in groups if g not in GROUPS]
+    if unknown:
+        raise ValueError(f"unknown parameter group(s) {unknown}; known: {', '.join(GROUPS)}")
+    out: list[Parameter] = []
+    deg = float(np.degrees(1.0))
+    moving = robot.revolute
+    for g in GROUPS:
+        if g not in groups:
+            continue
+        if g == "frames":
+            for i, a in enumerate(("x", "y", "z")):
+                out.append(Parameter(f"world.{a}", g, "world", (i,), "mm", 1e3, _MM))
+            for i, a in enumerate(("roll", "pitch", "yaw")):
+                out.append(Parameter(f"world.{a}", g, "world", (3 + i,), "deg", deg, _MRAD))
+            for k, m in enumerate(robot.marker_names):
+                for i, a in enumerate(("x", "y", "z")):
+                    out.append(Parameter(f"{m}.{a}", g, "marker_at", (k, i), "mm", 1e3, _MM))
+        elif g == "joint-offsets":
+            for e in moving:
+                out.append(Parameter(f"{robot.names[e]}.theta", g, "dh", (e, 1), "deg", deg, _MRAD))
+        elif g == "dh":
+            for e in moving:
+                n = robot.names[e]
+                out.append(Parameter(f"{n}.d", g, "dh", (e, 0), "mm", 1e3, _MM))
+                out.append(Parameter(f"{n}.a", g, "dh", (e, 2), "mm", 1e3, _MM))
+                out.append(Parameter(f"{n}.alpha", g, "dh", (e, 3), "deg", deg, _MRAD))
+        elif g == "joint-compliance":
+            for e in moving:
+                out.append(
+                    Parameter(
+                        f"{robot.names[e]}.k_theta",
+                        g,
+                        "compliance",
+                        (e, 0),
+                        "µrad/(N·m)",
+                        1e6,
+                        _COMP,
+                    )
+                )
+        else:
+            for e in moving:
+                for i, a in ((1, "alpha"), (2, "beta")):
+                    out.append(
+                        Parameter(
+                            f"{robot.names[e]}.k_{a}",
+                            g,
+                            "compliance",
+                            (e, i),
+                            "µrad/(N·m)",
+                            1e6,
+                            _COMP,
+                        )
+                    )
+    return tuple(out)
+
+
+def _where(table: tuple[Parameter, ...]) -> dict[str, tuple[np.ndarray, tuple[np.ndarray, ...]]]:
+    # For each field: the vector positions of its parameters and their array indices.
+    fields: dict[str, list[tuple[int, tuple[int, ...]]]] = {}
+    for k, p in enumerate(table):
+        fields.setdefault(p.field, []).append((k, p.index))
+    return {
+        f: (
+            np.array([k for k, _ in v]),
+            tuple(np.array(ix) for ix in zip(*(i for _, i in v), strict=True)),
+        )
+        for f, v in fields.items()
+    }
+
+
+def get_vector(robot: TreeRobot, table: tuple[Parameter, ...]) -> Float[Array, " P"]:
+    """The values (SI) of `table`'s parameters in `robot`."""
+    out = jnp.zeros(len(table), robot.dh.dtype)
+    for f, (pos, ix) in _where(table).items():
+        out = out.at[pos].set(getattr(robot, f)[ix])
+    return out
+
+
+def set_vector(robot: TreeRobot, table: tuple[Parameter, ...], p: Float[Array, " P"]) -> TreeRobot:
+    """`robot` with `table`'s parameters set to `p` (SI); traceable."""
+    where = _where(table)
+    fields = tuple(where)
+    new = tuple(getattr(robot, f).at[where[f][1]].set(p[where[f][0]]) for f in fields)
+    return eqx.tree_at(lambda r: tuple(getattr(r, f) for f in fields), robot, new)
+
+
+def parse_groups(text: str | None) -> tuple[str, ...]:
+    """`--params` text (comma-separated group names) to a tuple in `GROUPS` order;
+    `None` or empty: every group."""
+    if not text:
+        return GROUPS
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    unknown = [n for n in names if n not in GROUPS]
+    if unknown:
+        raise ValueError(f"--params: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
+    return tuple(g for g in GROUPS if g in names)

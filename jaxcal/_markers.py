@@ -1,0 +1,187 @@
+"""Absolute measurements as instruments give them: marker positions in the measurement
+system's frame (a laser tracker's, a camera system's), one robot pose a row.
+
+Columns (units in the names): `q1_deg … qN_deg`, the robot file's N active joints in its
+order; for each marker `M` named in the robot file, `M_x_mm, M_y_mm, M_z_mm`; optional
+`sigma_mm` (each coordinate's standard deviation, default the robot file's
+`noise_std_mm`) and `id`. An empty marker (all three cells empty) was not seen in that
+row. There are no load columns: the robot carries its own weight only.
+
+Inside, `MarkerData` is SI (rad, m); unseen markers are NaN with `seen` false.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+from pathlib import Path
+from typing import TextIO
+
+import equinox as eqx
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from ._io import DataError, atomic_file, finite_number, read_rows
+from ._model.tree import TreeRobot
+
+__all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns"]
+
+_MAX_REPORTED = 25
+
+
+class MarkerData(eqx.Module):
+    """Absolute marker measurements, SI.
+
+    - `q`: `(n, N)` commanded joint angles, rad.
+    - `markers`: `(n, k, 3)` marker positions in the measurement frame, m; NaN where
+      not seen; `None` for a plan (poses only).
+    - `seen`: `(n, k)` which markers were measured.
+    - `sigma`: `(n,)` standard deviation of each coordinate, m.
+    - `ids`: row labels.
+    """
+
+    q: Float[Array, "n N"]
+    markers: Float[Array, "n k 3"] | None
+    seen: Bool[Array, "n k"]
+    sigma: Float[Array, " n"]
+    ids: tuple[str, ...] = eqx.field(static=True, default=())
+    source: str = eqx.field(static=True, default="")
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+    def subset(self, rows) -> MarkerData:
+        """The rows `rows` (indices or a boolean mask)."""
+        rows = np.arange(len(self))[np.asarray(rows)]
+        ids = tuple(self.ids[i] for i in rows) if self.ids else ()
+        return MarkerData(
+            q=np.asarray(self.q)[rows],
+            markers=None if self.markers is None else np.asarray(self.markers)[rows],
+            seen=np.asarray(self.seen)[rows],
+            sigma=np.asarray(self.sigma)[rows],
+            ids=ids,
+            source=self.source,
+        )
+
+
+def marker_columns(robot: TreeRobot) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The joint columns and the marker columns a file for `robot` has."""
+    q = tuple(f"q{i}_deg" for i in range(1, robot.n_joints + 1))
+    m = tuple(f"{k}_{a}_mm" for k in robot.marker_names for a in "xyz")
+    return q, m
+
+
+def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = True) -> MarkerData:
+    """Read and validate an absolute-measurement CSV for `robot`; every problem (unknown
+    or incomplete marker columns, non-numeric or non-finite cells, angles beyond the
+    joint limits) is listed in one `DataError` naming file, row, line and column."""
+    path = Path(path)
+    rows = read_rows(path)
+    header = [h.strip() for h in rows[0]]
+    qcols, mcols = marker_columns(robot)
+    dupes = sorted({h for h in header if header.count(h) > 1})
+    if dupes:
+        raise DataError(f"{path}: duplicate column(s) {', '.join(dupes)}")
+    unknown = [h for h in header if h not in (*qcols, *mcols, "sigma_mm", "id")]
+    if unknown:
+        raise DataError(
+            f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; robot "
+            f"{robot.name!r} has joints q1_deg..q{robot.n_joints}_deg and markers "
+            f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm)"
+        )
+    missing = [c for c in qcols if c not in header]
+    for m in robot.marker_names:
+        cols = [f"{m}_{a}_mm" for a in "xyz"]
+        have = [c in header for c in cols]
+        if any(have) and not all(have):
+            missing += [c for c, h in zip(cols, have, strict=True) if not h]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
+    present = [m for m in robot.marker_names if f"{m}_x_mm" in header]
+    if require_markers and not present:
+        raise DataError(
+            f"{path}: no marker columns; expected {', '.join(mcols)} (some or all markers)"
+        )
+    col = {h: i for i, h in enumerate(header)}
+    body = [(i + 2, r) for i, r in enumerate(rows[1:]) if any(c.strip() for c in r)]
+    if not body:
+        raise DataError(f"{path}: no data rows")
+    n, k = len(body), len(robot.marker_names)
+    q = np.zeros((n, robot.n_joints))
+    y = np.full((n, k, 3), np.nan)
+    sigma = np.full(n, robot.noise_std)
+    ids: list[str] = []
+    limits = np.degrees(np.asarray(robot.joint_limits))
+    problems: list[str] = []
+    for r, (line, row) in enumerate(body):
+        where = f"{path}, row {r + 1} (line {line})"
+        if len(row) != len(header):
+            problems.append(f"{where}: has {len(row)} fields, header has {len(header)}")
+            continue
+        for i, c in enumerate(qcols):
+            v = finite_number(row[col[c]].strip())
+            if v is None:
+                problems.append(f"{where}, column {c}: {row[col[c]]!r} is not a finite number")
+            elif not limits[i, 0] - 1e-9 <= v <= limits[i, 1] + 1e-9:
+                problems.append(
+                    f"{where}, column {c}: {v:g} deg is outside the joint limits "
+                    f"[{limits[i, 0]:g}, {limits[i, 1]:g}] of {robot.joint_names[i]}"
+                )
+            else:
+                q[r, i] = np.radians(v)
+        for m in present:
+            j = robot.marker_names.index(m)
+            cells = [row[col[f"{m}_{a}_mm"]].strip() for a in "xyz"]
+            if not any(cells):
+                continue  # not seen in this row
+            for a, cell in zip("xyz", cells, strict=True):
+                v = finite_number(cell)
+                if v is None:
+                    what = (
+                        "empty (a marker is unseen only when all three cells are)"
+                        if not (cell)
+                        else f"{cell!r} is not a finite number"
+                    )
+                    problems.append(f"{where}, column {m}_{a}_mm: {what}")
+                else:
+                    y[r, j, "xyz".index(a)] = v * 1e-3
+        if "sigma_mm" in col:
+            v = finite_number(row[col["sigma_mm"]].strip())
+            if v is None or v <= 0:
+                problems.append(f"{where}, column sigma_mm: must be a positive number")
+            else:
+                sigma[r] = v * 1e-3
+        ids.append(row[col["id"]].strip() if "id" in col else str(r + 1))
+    if problems:
+        more = len(problems) - _MAX_REPORTED
+        text = "\n  ".join(problems[:_MAX_REPORTED])
+        tail = f"\n  ... and {more} more" if more > 0 else ""
+        raise DataError(f"{path}: {len(problems)} problem(s):\n  {text}{tail}")
+    seen = np.all(np.isfinite(y), axis=-1)
+    if require_markers and not seen.any():
+        raise DataError(f"{path}: no marker was seen in any row")
+    return MarkerData(
+        q=q,
+        markers=y if present else None,
+        seen=seen,
+        sigma=sigma,
+        ids=tuple(ids),
+        source=str(path),
+    )
+
+
+def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot, markers) -> None:
+    """Write `data`'s poses with `markers` `(n, k, 3)` (m; NaN: not written) as an
+    absolute-measurement CSV, to a path (atomically: a failure leaves any old file as it
+    was) or an open text stream."""
+    qcols, mcols = marker_columns(robot)
+    y = np.asarray(markers) * 1e3
+    with contextlib.ExitStack() as stack:
+        fh = stack.enter_context(atomic_file(path)) if isinstance(path, str | Path) else path
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["id", *qcols, *mcols, "sigma_mm"])
+        for r in range(len(data)):
+            cells = [f"{v:.12g}" for v in np.degrees(np.asarray(data.q[r]))]
+            cells += ["" if not np.isfinite(v) else f"{v:.6f}" for v in y[r].ravel()]
+            label = data.ids[r] if data.ids else str(r + 1)
+            w.writerow([label, *cells, f"{float(data.sigma[r]) * 1e3:g}"])

@@ -1,0 +1,409 @@
+"""A general robot: a kinematic tree of revolute joints and fixed frames, with point
+masses, marker frames and virtual springs, read from a robot file.
+
+Each element of the tree is a fixed origin transform followed by a motion about its z
+axis (URDF's model). The origin is written as a translation and roll-pitch-yaw
+(`origin`) followed by one *modified* DH row (Craig; `dh`):
+
+    T_parent_element = Trans(x, y, z) · Rz(yaw) Ry(pitch) Rx(roll)
+                       · Rx(α) · Trans_x(a) · Ry(β) · Rz(θ) · Trans_z(d) · Rz(q)
+
+so a DH row, a fixed frame and a URDF joint origin are all the same thing with some
+numbers zero (`β` is Hayati's extra angle for near-parallel axes). A revolute
+element's angle `q` is a linear combination of the active joints' commanded angles
+(`coupling`): an active joint is `{i: 1}`, a passive joint coupled by a parallelogram
+is e.g. `{1: -1, 2: -1}`.
+
+The elastic elements are virtual springs at each revolute element: one about the joint
+axis (compliance `κθ`) and two lateral ones about the element's x and y axes (`κα`,
+`κβ`), all turning with the link after the joint's motion:
+
+    ... · Rz(q + φz) · Rx(φx) · Ry(φy)
+
+Everything inside is SI (m, rad, kg, rad/(N·m)); the robot file carries its units in
+its key names. Array fields are what one identifies; topology is plain Python.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+__all__ = ["TreeRobot", "tree_from_dict", "tree_to_dict", "load_tree", "TREE_PRESETS"]
+
+#: Built-in general robot presets (files in `jaxcal/robots/`).
+TREE_PRESETS: tuple[str, ...] = ("dlr_agile_justin",)
+
+G = 9.80665  # m/s², standard gravity
+
+
+class TreeRobot(eqx.Module):
+    """A robot given as a kinematic tree (see the module docstring for the conventions).
+
+    **Arrays (SI)**, `e` elements, `n` active joints, `m` masses, `k` markers:
+
+    - `origin`: `(e, 6)` fixed translation (m) and roll, pitch, yaw (rad) of each element.
+    - `dh`: `(e, 5)` modified DH row `(d, θ, a, α, β)` (m, rad, m, rad, rad).
+    - `compliance`: `(e, 3)` spring compliances about z (the joint), x and y (lateral),
+      rad/(N·m); zero rows for fixed elements.
+    - `mass_kg`, `mass_at`: `(m,)` point masses and their centres of gravity in the frame
+      of their element (m).
+    - `marker_at`: `(k, 3)` marker positions in the frame of their element (m).
+    - `world`: `(6,)` pose of the robot's base in the measurement system's frame:
+      translation (m) and roll, pitch, yaw (rad).
+    - `gravity`: `(3,)` gravitational acceleration in the base frame, m/s².
+    - `joint_limits`: `(n, 2)` `[lo, hi]` of the active joints, rad.
+
+    **Topology (static)**: `names` and `parents` (index of the parent element, −1 for the
+    base) of the elements in topological order, `coupling` (for each element, the
+    `((active_index, coefficient), ...)` of its angle; empty for a fixed element),
+    `joint_names` (the active joints, in the data's column order), `mass_element`,
+    `marker_element`, `marker_names`.
+    """
+
+    origin: Float[Array, "e 6"]
+    dh: Float[Array, "e 5"]
+    compliance: Float[Array, "e 3"]
+    mass_kg: Float[Array, " m"]
+    mass_at: Float[Array, "m 3"]
+    marker_at: Float[Array, "k 3"]
+    world: Float[Array, 6]
+    gravity: Float[Array, 3]
+    joint_limits: Float[Array, "n 2"]
+    names: tuple[str, ...] = eqx.field(static=True)
+    parents: tuple[int, ...] = eqx.field(static=True)
+    coupling: tuple[tuple[tuple[int, float], ...], ...] = eqx.field(static=True)
+    joint_names: tuple[str, ...] = eqx.field(static=True)
+    mass_element: tuple[int, ...] = eqx.field(static=True)
+    marker_element: tuple[int, ...] = eqx.field(static=True)
+    marker_names: tuple[str, ...] = eqx.field(static=True)
+    name: str = eqx.field(static=True, default="")
+    description: str = eqx.field(static=True, default="")
+    sources: tuple[str, ...] = eqx.field(static=True, default=())
+    noise_std: float = eqx.field(static=True, default=1e-3)
+
+    def __check_init__(self):
+        e, n = len(self.names), len(self.joint_names)
+        shapes = {
+            "origin": (e, 6),
+            "dh": (e, 5),
+            "compliance": (e, 3),
+            "mass_kg": (len(self.mass_element),),
+            "mass_at": (len(self.mass_element), 3),
+            "marker_at": (len(self.marker_element), 3),
+            "world": (6,),
+            "gravity": (3,),
+            "joint_limits": (n, 2),
+        }
+        for field, shape in shapes.items():
+            got = getattr(self, field).shape
+            if got != shape:
+                raise ValueError(f"{field} must have shape {shape}, got {got}")
+        if len(self.parents) != e or len(self.coupling) != e:
+            raise ValueError(f"parents and coupling must have {e} entries (one per element)")
+        for i, p in enumerate(self.parents):
+            if not -1 <= p < i:
+                raise ValueError(
+                    f"element {self.names[i]!r}: parent {p} must be an earlier element or -1"
+                )
+        for i, c in enumerate(self.coupling):
+            for j, _ in c:
+                if not 0 <= j < n:
+                    raise ValueError(f"element {self.names[i]!r}: coupled to joint {j} of {n}")
+        for i in (*self.mass_element, *self.marker_element):
+            if not 0 <= i < e:
+                raise ValueError(f"element index {i} out of range (0..{e - 1})")
+        if len(set(self.marker_names)) != len(self.marker_names):
+            raise ValueError(f"marker names must be distinct, got {self.marker_names}")
+
+    @property
+    def n_joints(self) -> int:
+        """Number of active (commanded) joints."""
+        return len(self.joint_names)
+
+    @property
+    def revolute(self) -> tuple[int, ...]:
+        """Indices of the elements that move (active or coupled)."""
+        return tuple(i for i, c in enumerate(self.coupling) if c)
+
+    def coupling_matrix(self) -> np.ndarray:
+        """`(e, n)`: element angles are `coupling_matrix() @ q`."""
+        C = np.zeros((len(self.names), self.n_joints))
+        for i, c in enumerate(self.coupling):
+            for j, k in c:
+                C[i, j] += k
+        return C
+
+
+# -- robot file --------------------------------------------------------------------------
+
+_KNOWN: dict[str, tuple[str, ...]] = {
+    "": (
+        "name",
+        "kind",
+        "description",
+        "sources",
+        "dh_convention",
+        "joints",
+        "elements",
+        "masses",
+        "markers",
+        "world",
+        "gravity_m_per_s2",
+        "noise_std_mm",
+        "calibration",
+    ),
+    "elements": (
+        "name",
+        "parent",
+        "origin_xyz_m",
+        "origin_rpy_deg",
+        "origin_matrix",
+        "dh",
+        "coupling",
+        "compliance_urad_per_Nm",
+    ),
+    "dh": ("d_m", "theta_deg", "a_m", "alpha_deg", "beta_deg"),
+    "joints": ("name", "limits_deg"),
+    "masses": ("element", "kg", "at_m"),
+    "markers": ("name", "element", "at_m"),
+    "world": ("xyz_m", "rpy_deg", "matrix"),
+}
+
+
+def _check_keys(obj: Any, where: str, known: tuple[str, ...]) -> None:
+    if not isinstance(obj, dict):
+        raise ValueError(f"robot file: {where or 'the top level'} must be an object")
+    for k in obj:
+        if k not in known:
+            near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+            hint = f"; did you mean {near[0]!r}?" if near else ""
+            raise ValueError(f"robot file: unknown key {where}{k!r}{hint}")
+
+
+def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad) of a rotation matrix, `R = Rz(yaw) Ry(pitch) Rx(roll)`.
+    A matrix printed with rounded entries is first made orthonormal (its nearest rotation
+    by SVD)."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, np.float64)[:3, :3])
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    pitch = math.asin(max(-1.0, min(1.0, -R[2, 0])))
+    if abs(math.cos(pitch)) < 1e-9:  # gimbal lock: put the whole turn into roll
+        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
+    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
+
+
+def _pose(d: dict, where: str, xyz: str, rpy: str, matrix: str) -> np.ndarray:
+    """`(6,)` translation and rpy (rad) from either `xyz`/`rpy` keys or a 4×4 `matrix`."""
+    if matrix in d:
+        if xyz in d or rpy in d:
+            raise ValueError(f"robot file: {where}: give {matrix!r} or {xyz!r}/{rpy!r}, not both")
+        T = np.asarray(d[matrix], np.float64)
+        if T.shape != (4, 4):
+            raise ValueError(f"robot file: {where}.{matrix} must be a 4x4 matrix")
+        return np.concatenate([T[:3, 3], rpy_from_matrix(T)])
+    t = np.asarray(d.get(xyz, [0.0, 0.0, 0.0]), np.float64)
+    r = np.radians(np.asarray(d.get(rpy, [0.0, 0.0, 0.0]), np.float64))
+    if t.shape != (3,) or r.shape != (3,):
+        raise ValueError(f"robot file: {where}: {xyz} and {rpy} must have 3 numbers each")
+    return np.concatenate([t, r])
+
+
+def tree_from_dict(d: dict) -> TreeRobot:
+    """Build a `TreeRobot` from a parsed robot file (see `jaxcal/robots/*.json`); every
+    problem raises `ValueError` naming the key."""
+    _check_keys(d, "", _KNOWN[""])
+    joints = d.get("joints")
+    if not isinstance(joints, list) or not joints:
+        raise ValueError("robot file: 'joints' must be a non-empty list of active joints")
+    joint_names, limits = [], []
+    for i, j in enumerate(joints):
+        _check_keys(j, f"joints[{i}].", _KNOWN["joints"])
+        joint_names.append(str(j.get("name", f"q{i + 1}")))
+        lim = np.radians(np.asarray(j.get("limits_deg", [-180.0, 180.0]), np.float64))
+        if lim.shape != (2,) or not lim[0] < lim[1]:
+            raise ValueError(f"robot file: joints[{i}].limits_deg must be [lo, hi] with lo < hi")
+        limits.append(lim)
+    jindex = {n: i for i, n in enumerate(joint_names)}
+
+    names: list[str] = []
+    parents, couplings, origins, dhs, comps = [], [], [], [], []
+    for i, el in enumerate(d.get("elements", [])):
+        where = f"elements[{i}]"
+        _check_keys(el, f"{where}.", _KNOWN["elements"])
+        name = str(el.get("name", f"e{i}"))
+        if name in names:
+            raise ValueError(f"robot file: {where}: element name {name!r} used twice")
+        parent = el.get("parent")
+        if parent is not None and parent not in names:
+            raise ValueError(f"robot file: {where}.parent {parent!r} is not an earlier element")
+        names.append(name)
+        parents.append(-1 if parent is None else names.index(parent))
+        origins.append(_pose(el, where, "origin_xyz_m", "origin_rpy_deg", "origin_matrix"))
+        row = el.get("dh", {})
+        _check_keys(row, f"{where}.dh.", _KNOWN["dh"])
+        dhs.append(
+            [
+                float(row.get("d_m", 0.0)),
+                math.radians(float(row.get("theta_deg", 0.0))),
+                float(row.get("a_m", 0.0)),
+                math.radians(float(row.get("alpha_deg", 0.0))),
+                math.radians(float(row.get("beta_deg", 0.0))),
+            ]
+        )
+        coupling = el.get("coupling", {})
+        if not isinstance(coupling, dict):
+            raise ValueError(f"robot file: {where}.coupling must map joint names to numbers")
+        for j in coupling:
+            if j not in jindex:
+                raise ValueError(f"robot file: {where}.coupling: unknown joint {j!r}")
+        couplings.append(tuple((jindex[j], float(k)) for j, k in coupling.items()))
+        c = np.asarray(el.get("compliance_urad_per_Nm", [0.0, 0.0, 0.0]), np.float64)
+        if c.shape != (3,):
+            raise ValueError(f"robot file: {where}.compliance_urad_per_Nm needs 3 numbers")
+        if not couplings[-1] and np.any(c != 0):
+            raise ValueError(f"robot file: {where}: a fixed element has no spring")
+        comps.append(c * 1e-6)
+    if not names:
+        raise ValueError("robot file: 'elements' must be a non-empty list")
+
+    def element(ref: Any, where: str) -> int:
+        if ref not in names:
+            raise ValueError(f"robot file: {where}.element {ref!r} is not an element")
+        return names.index(ref)
+
+    mass_el, mass_kg, mass_at = [], [], []
+    for i, m in enumerate(d.get("masses", [])):
+        _check_keys(m, f"masses[{i}].", _KNOWN["masses"])
+        mass_el.append(element(m.get("element"), f"masses[{i}]"))
+        mass_kg.append(float(m["kg"]))
+        mass_at.append(np.asarray(m.get("at_m", [0.0, 0.0, 0.0]), np.float64))
+    mk_el, mk_names, mk_at = [], [], []
+    for i, m in enumerate(d.get("markers", [])):
+        _check_keys(m, f"markers[{i}].", _KNOWN["markers"])
+        mk_names.append(str(m["name"]))
+        mk_el.append(element(m.get("element"), f"markers[{i}]"))
+        mk_at.append(np.asarray(m.get("at_m", [0.0, 0.0, 0.0]), np.float64))
+    world = d.get("world", {})
+    _check_keys(world, "world.", _KNOWN["world"])
+    g = np.asarray(d.get("gravity_m_per_s2", [0.0, 0.0, -G]), np.float64)
+
+    f = jnp.asarray
+    return TreeRobot(
+        origin=f(np.array(origins)),
+        dh=f(np.array(dhs)),
+        compliance=f(np.array(comps)),
+        mass_kg=f(np.array(mass_kg)).reshape(len(mass_el)),
+        mass_at=f(np.array(mass_at)).reshape(len(mass_el), 3),
+        marker_at=f(np.array(mk_at)).reshape(len(mk_el), 3),
+        world=f(_pose(world, "world", "xyz_m", "rpy_deg", "matrix")),
+        gravity=f(g),
+        joint_limits=f(np.array(limits)),
+        names=tuple(names),
+        parents=tuple(parents),
+        coupling=tuple(couplings),
+        joint_names=tuple(joint_names),
+        mass_element=tuple(mass_el),
+        marker_element=tuple(mk_el),
+        marker_names=tuple(mk_names),
+        name=str(d.get("name", "")),
+        description=str(d.get("description", "")),
+        sources=tuple(str(s) for s in d.get("sources", [])),
+        noise_std=float(d.get("noise_std_mm", 1.0)) * 1e-3,
+    )
+
+
+def _r(x, nd: int = 12) -> list[float]:
+    return [round(float(v), nd) for v in np.asarray(x).ravel()]
+
+
+def tree_to_dict(robot: TreeRobot) -> dict:
+    """The robot file of `robot` (inverse of `tree_from_dict` to round-off)."""
+    o, dh, c = np.asarray(robot.origin), np.asarray(robot.dh), np.asarray(robot.compliance)
+    elements = []
+    for i, name in enumerate(robot.names):
+        el: dict[str, Any] = {"name": name}
+        if robot.parents[i] >= 0:
+            el["parent"] = robot.names[robot.parents[i]]
+        if np.any(o[i] != 0):
+            el["origin_xyz_m"] = _r(o[i, :3])
+            el["origin_rpy_deg"] = _r(np.degrees(o[i, 3:]))
+        keys = ("d_m", "theta_deg", "a_m", "alpha_deg", "beta_deg")
+        vals = [dh[i, 0], math.degrees(dh[i, 1]), dh[i, 2], *np.degrees(dh[i, 3:])]
+        row = {k: round(float(v), 12) for k, v in zip(keys, vals, strict=True) if v != 0}
+        if row:
+            el["dh"] = row
+        if robot.coupling[i]:
+            el["coupling"] = {robot.joint_names[j]: k for j, k in robot.coupling[i]}
+            el["compliance_urad_per_Nm"] = _r(c[i] * 1e6, 9)
+        elements.append(el)
+    w = np.asarray(robot.world)
+    return {
+        "name": robot.name,
+        "kind": "tree",
+        "description": robot.description,
+        "sources": list(robot.sources),
+        "dh_convention": "modified (Craig): Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d) Rz(q)",
+        "joints": [
+            {"name": n, "limits_deg": _r(np.degrees(lim), 9)}
+            for n, lim in zip(robot.joint_names, np.asarray(robot.joint_limits), strict=True)
+        ],
+        "elements": elements,
+        "masses": [
+            {"element": robot.names[e], "kg": float(k), "at_m": _r(a)}
+            for e, k, a in zip(
+                robot.mass_element,
+                np.asarray(robot.mass_kg),
+                np.asarray(robot.mass_at),
+                strict=True,
+            )
+        ],
+        "markers": [
+            {"name": n, "element": robot.names[e], "at_m": _r(a)}
+            for n, e, a in zip(
+                robot.marker_names,
+                robot.marker_element,
+                np.asarray(robot.marker_at),
+                strict=True,
+            )
+        ],
+        "world": {"xyz_m": _r(w[:3]), "rpy_deg": _r(np.degrees(w[3:]))},
+        "gravity_m_per_s2": _r(robot.gravity),
+        "noise_std_mm": robot.noise_std * 1e3,
+    }
+
+
+def load_tree(spec: str | Path) -> TreeRobot:
+    """A `TreeRobot` from a built-in preset name (`TREE_PRESETS`) or a robot file path."""
+    if str(spec) in TREE_PRESETS:
+        text = resources.files("jaxcal.robots").joinpath(f"{spec}.json").read_text()
+        where = f"preset {spec}"
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise ValueError(f"robot {spec}: no such file or preset")
+        text, where = path.read_text(), str(path)
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"robot {where}: not valid JSON ({e})") from None
+    return tree_from_dict(d)
+
+
+def is_tree_file(spec: str | Path) -> bool:
+    """Whether a preset name or robot file describes a `TreeRobot` (`"kind": "tree"`)."""
+    if str(spec) in TREE_PRESETS:
+        return True
+    try:
+        return json.loads(Path(spec).read_text()).get("kind") == "tree"
+    except (OSError, ValueError, AttributeError):
+        return False
