@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from .._model.tree_statics import marker_positions, predict_markers
+from .._model.tree_statics import predict_markers
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
 from .parameter_groups import GROUPS, Parameter, get_vector, parameter_table, set_vector
@@ -245,11 +245,6 @@ def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
     y, _ = predicted_markers(robot, data)
     rows, markers = observations(data)
     return np.linalg.norm(np.asarray(data.markers)[rows, markers] - y[rows, markers], axis=-1)
-
-
-def rigid_markers(robot: TreeRobot, q) -> Array:
-    """Marker positions of the rigid robot (no springs), for comparison."""
-    return jax.vmap(marker_positions, in_axes=(None, 0))(robot, jnp.asarray(q))
 
 
 class Stage(NamedTuple):
