@@ -1,5 +1,5 @@
 """Where the waiting goes: trace, lower, compile and run time and program size of
-jaxcal's main compiled programs (issue 11: measure before cutting).
+jaxcal's main compiled programs: where to cut, measured before cutting.
 
 For each program, the jitted function's dynamic arguments are split from its static
 ones and the ahead-of-time stages are timed one by one: `jax.jit(f).trace` (Python

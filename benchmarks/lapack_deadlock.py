@@ -12,8 +12,7 @@ a wall-clock limit; a run past the limit counts as a hang.
 
 Cases:
 - `jaxcal`: `model_deflections` of a 41 × 25 grid of configurations with
-  `JAXCAL_LINALG=lineax` (lineax's LU in every Newton step of both equilibria), the
-  program the hang was first seen in;
+  `JAXCAL_LINALG=lineax` (lineax's LU in every Newton step of both equilibria);
 - `eigh`: the smallest program of the kind: two independent batched `eigh` and two
   batched `solve` in one jit.
 
@@ -22,8 +21,8 @@ Cases:
 jaxlib 0.10.2, 2 cores (2026-11-24; `benchmarks/README.md`): `eigh` hangs in 3 of 3
 runs, 9 of 10 under load; with `--xla-flags
 --xla_cpu_enable_concurrency_optimized_scheduler=false` in 0 of 40 under load. The
-`jaxcal` case no longer hangs either way (0 of 40 under load): its earlier hang was in
-`eigh`, which jaxcal's own Jacobi iteration replaces under both backends.
+`jaxcal` case hangs in 0 of 40 under load either way: its `eigh` is jaxcal's own Jacobi
+iteration under both backends.
 """
 
 from __future__ import annotations

@@ -21,10 +21,10 @@ import numpy as np
 
 SIGMA = 2e-5  # m, tracker noise (σ = 0.02 mm)
 #: Size of a hidden effect: the largest row of the gap it leaves (residual of the
-#: nominal model refitted to noise-free data with the effect), in σ (issue: 3–10 σ in
-#: the affected rows). Part of an effect is always absorbed by the re-identified
-#: compliances; what the data can show is the rest, and an effect that the refitted
-#: nominal model reproduces to the noise is no discrepancy. The raw size (before the
+#: nominal model refitted to noise-free data with the effect), in σ (3–10 σ in the
+#: affected rows is the range of interest). Part of an effect is always absorbed by the
+#: re-identified compliances; what the data can show is the rest, and an effect that the
+#: refitted nominal model reproduces to the noise is no discrepancy. The raw size (before the
 #: refit) is reported alongside (`raw_sigma`).
 MAX_SIGMA = 5.0
 #: Sensitivity variant (`--perturbed`): the true nominal parameters (k1..k6, Kc, Kc·s0)

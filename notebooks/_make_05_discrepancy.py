@@ -133,7 +133,7 @@ already predicts those data — so the gap, not the raw size, is what the workfl
 should detect. The table below gives each case's raw size (`raw_sigma`) at a 5 σ gap:
 the raw effects are larger, some well beyond 10 σ. Sized by the raw effect at 8 σ
 instead, link bending of the upper arm was named in 2 of 10 seeds and of the lower arm
-in 6 of 10 (an earlier version of this study).""",
+in 6 of 10 (a variant of this study, not in its JSON files).""",
     ),
     (
         "code",

@@ -32,7 +32,7 @@ def clean(tmp_path_factory, data_dir, robot):
 
 
 def test_reproduces_reference_deflections(clean, data_dir, robot):
-    """Done when: every deflection within 0.5 µm of the independent reference."""
+    """Every deflection within 0.5 µm of the independent reference."""
     _, sim = clean
     ref = _read(data_dir / REF, robot)
     assert len(sim) == len(ref) == 40

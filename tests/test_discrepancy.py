@@ -1,4 +1,4 @@
-"""Discrepancy workflow (issue 6): candidate effects, gap statistics, the seeds study
+"""Discrepancy workflow: candidate effects, gap statistics, the seeds study
 (each effect hidden in 10 noise seeds must be named, effect and joint, in ≥ 9; no
 effect must give "none" in ≥ 9) and the `jaxcal discover` command."""
 
@@ -167,7 +167,7 @@ def test_every_joint_of_joint_candidates_is_a_case():
 @pytest.mark.parametrize("case", EFFECTS)
 def test_hidden_effect_is_named(study, case):
     # The tests run STUDY.TEST_SEEDS seeds per case (the 10-seed study is in the
-    # notebook's JSON). The issue allows 1 miss in 10 (≥ 9/10); on fewer seeds every one
+    # notebook's JSON). The claim allows 1 miss in 10 (≥ 9/10); on fewer seeds every one
     # must be named — a rate of 0.9 passes 3/3 with probability 0.73, so a case that
     # misses here is one to look at, not noise to tolerate.
     named = study[case]["named"]

@@ -1,4 +1,4 @@
-"""Identification (issue 3): recovery on the example data, unbiasedness and coverage over
+"""Identification: recovery on the example data, unbiasedness and coverage over
 seeded Monte-Carlo trials (vectorised), identifiability errors, robust loss, the exact
 eq. (22), derivatives of the fitted model, vmap/loop consistency."""
 
@@ -35,7 +35,7 @@ def test_example_nonlinear_recovers_truth(example, example_fit):
     z = [(float(res.estimate[i]) - truth[n]) / float(res.std[i]) for i, n in enumerate(res.names)]
     assert res.names == tuple(truth)
     assert np.all(np.abs(z) < 3.0), dict(zip(res.names, z, strict=True))
-    # chi2_red of 144 − 8 dof has sd sqrt(2/136) ≈ 0.12; the issue's band is 1 ± 0.3.
+    # chi2_red of 144 − 8 dof has sd sqrt(2/136) ≈ 0.12; the band is 1 ± 0.3 (2.5 sd).
     assert abs(float(res.chi2_red) - 1.0) < 0.3
     np.testing.assert_allclose(
         res.ci95[:, 1] - res.estimate, 1.959963984540054 * res.std, rtol=1e-12
@@ -67,7 +67,7 @@ def _truths(robot, n, seed, spread=0.15):
 
 def _check_unbiased_and_coverage(est, std, ok, truth_p, names):
     """200 trials: the mean of (estimate − truth)/std has standard error 1/√200 ≈ 0.071,
-    so the issue's bound 0.2 is 2.8 standard errors; the coverage of 95 % intervals has
+    so the bound 0.2 is 2.8 standard errors; the coverage of 95 % intervals has
     binomial sd √(0.95·0.05/200) ≈ 1.5 %, so the band 90–99 % is −3.3 / +2.7 sd."""
     # A fit that does not converge within its step budget is flagged, not hidden; more
     # than 1 % of such flags would be a defect of the solver set-up.

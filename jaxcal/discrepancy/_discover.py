@@ -137,7 +137,7 @@ def discover_batch(
 
     # 3. full nonlinear fits of the best K per set, all in one batch
     say(f"fitting the best {K} of {len(cands)} candidates with the full model")
-    starts, frees, targets, owner = [], [], [], []
+    starts, frees, targets, set_and_candidate = [], [], [], []
     for s in range(S):
         for i in top[s]:
             if from_scan[s, i]:
@@ -151,9 +151,9 @@ def discover_batch(
             starts.append(st)
             frees.append(candidate_free(sm, i))
             targets.append(deflections[s])
-            owner.append((s, i))
+            set_and_candidate.append((s, i))
     targets_a = np.asarray(targets)
-    sigmas_a = np.asarray([sigma[s] for s, _ in owner])
+    sigmas_a = np.asarray([sigma[s] for s, _ in set_and_candidate])
     fits = sm.fit(
         np.asarray(starts),
         np.asarray(frees),
@@ -161,7 +161,7 @@ def discover_batch(
         sigmas_a,
         max_steps=max_steps,
     )
-    refined = {o: j for j, o in enumerate(owner)}
+    refined = {o: j for j, o in enumerate(set_and_candidate)}
 
     # 4. rank the candidates of each set; held-out residuals of the nominal model and of
     # each set's best candidate
