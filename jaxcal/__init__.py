@@ -123,10 +123,18 @@ from ._model.observation import (
     observation_linear as observation_linear,
     observation_physical as observation_physical,
 )
+from ._model.quasi_serial import (
+    tree_dict_from_quasi_serial as tree_dict_from_quasi_serial,
+)
 from ._model.simulate import (
     DeflectionError as DeflectionError,
     model_deflections as model_deflections,
     simulate as simulate,
+)
+from ._model.spring_laws import (
+    SPRING_LAWS as SPRING_LAWS,
+    CompensatorLaw as CompensatorLaw,
+    SpringLaw as SpringLaw,
 )
 from ._model.tree import (
     TREE_PRESETS as TREE_PRESETS,
@@ -138,8 +146,10 @@ from ._model.tree import (
 from ._model.tree_statics import (
     TreeEquilibrium as TreeEquilibrium,
     element_frames as element_frames,
+    link_angles as link_angles,
     marker_positions as marker_positions,
     predict_markers as predict_markers,
+    tree_deflection as tree_deflection,
     tree_equilibrium as tree_equilibrium,
 )
 from ._parameters import (

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._robot import Robot
+from .spring_laws import compensator_length
 
 __all__ = [
     "spring_length",
@@ -41,8 +42,7 @@ def _spring_length(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]
 
 
 def _length(lc, l2, phi2):
-    # Eq. (7): the spring spans the triangle of the two lever arms.
-    return jnp.sqrt(lc**2 + l2**2 - 2.0 * lc * l2 * jnp.cos(phi2))
+    return compensator_length(lc, l2, phi2)
 
 
 def spring_energy(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:

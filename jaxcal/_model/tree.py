@@ -9,16 +9,25 @@ axis (URDF's model). The origin is written as a translation and roll-pitch-yaw
                        · Rx(α) · Trans_x(a) · Ry(β) · Rz(θ) · Trans_z(d) · Rz(q)
 
 so a DH row, a fixed frame and a URDF joint origin are all the same thing with some
-numbers zero (`β` is Hayati's extra angle for near-parallel axes). A revolute
-element's angle `q` is a linear combination of the active joints' commanded angles
-(`coupling`): an active joint is `{i: 1}`, a passive joint coupled by a parallelogram
-is e.g. `{1: -1, 2: -1}`.
+numbers zero (`β` is Hayati's extra angle for near-parallel axes).
 
-The elastic elements are virtual springs at each revolute element: one about the joint
+Each active joint `j` is driven through a spring: its link-side angle is `q_j + θ_j`,
+with `θ_j` the deflection of the joint spring of its *drive element* (by default the
+element coupled to it alone, `{j: 1}`). A moving element's angle is a linear
+combination of link-side angles (`coupling`): an active joint is `{j: 1}`; a passive
+joint of a parallelogram is e.g. `{j1: -1, j2: -1}` and follows the springs of the
+joints that drive it, as a real parallelogram does. An element that drives no joint
+may carry a joint spring of its own, added to its angle.
+
+The elastic elements are virtual springs at the moving elements: one about the joint
 axis (compliance `κθ`) and two lateral ones about the element's x and y axes (`κα`,
 `κβ`), all turning with the link after the joint's motion:
 
-    ... · Rz(q + φz) · Rx(φx) · Ry(φy)
+    ... · Rz(Σ c_j (q_j + θ_j) + φz) · Rx(φx) · Ry(φy)
+
+Which of its three springs an element has is part of the topology (`springs`): all
+three by default. Spring laws (`spring_laws.py`, e.g. a gravity compensator) act on a
+joint's link-side angle.
 
 Everything inside is SI (m, rad, kg, rad/(N·m)); the robot file carries its units in
 its key names. Array fields are what one identifies; topology is plain Python.
@@ -38,12 +47,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .spring_laws import SpringLaw, spring_law_from_dict, spring_law_to_dict
+
 __all__ = ["TreeRobot", "tree_from_dict", "tree_to_dict", "load_tree", "TREE_PRESETS"]
 
 #: Built-in general robot presets (files in `jaxcal/robots/`).
 TREE_PRESETS: tuple[str, ...] = ("dlr_agile_justin",)
 
 G = 9.80665  # m/s², standard gravity
+_SPRINGS = ("theta", "alpha", "beta")  # the robot file's names of an element's springs
 
 
 class TreeRobot(eqx.Module):
@@ -66,8 +78,11 @@ class TreeRobot(eqx.Module):
     **Topology (static)**: `names` and `parents` (index of the parent element, −1 for the
     base) of the elements in topological order, `coupling` (for each element, the
     `((active_index, coefficient), ...)` of its angle; empty for a fixed element),
-    `joint_names` (the active joints, in the data's column order), `mass_element`,
-    `marker_element`, `marker_names`.
+    `joint_names` (the active joints, in the data's column order), `drive` (for each
+    active joint, the element whose joint spring is its θ), `springs` (for each element,
+    whether it has its `(κθ, κα, κβ)` springs), `mass_element`, `marker_element`,
+    `marker_names`. `laws`: the spring laws acting on joints (each with its own array
+    parameters).
     """
 
     origin: Float[Array, "e 6"]
@@ -86,6 +101,11 @@ class TreeRobot(eqx.Module):
     mass_element: tuple[int, ...] = eqx.field(static=True)
     marker_element: tuple[int, ...] = eqx.field(static=True)
     marker_names: tuple[str, ...] = eqx.field(static=True)
+    drive: tuple[int, ...] = eqx.field(static=True)
+    springs: tuple[tuple[bool, bool, bool], ...] = eqx.field(static=True)
+    laws: tuple[SpringLaw, ...] = ()
+    commanded: tuple[tuple[tuple[int, float], ...], ...] = eqx.field(static=True, default=())
+    experiment: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=())
     name: str = eqx.field(static=True, default="")
     description: str = eqx.field(static=True, default="")
     sources: tuple[str, ...] = eqx.field(static=True, default=())
@@ -108,8 +128,27 @@ class TreeRobot(eqx.Module):
             got = getattr(self, field).shape
             if got != shape:
                 raise ValueError(f"{field} must have shape {shape}, got {got}")
-        if len(self.parents) != e or len(self.coupling) != e:
-            raise ValueError(f"parents and coupling must have {e} entries (one per element)")
+        if len(self.parents) != e or len(self.coupling) != e or len(self.springs) != e:
+            raise ValueError(
+                f"parents, coupling and springs must have {e} entries (one per element)"
+            )
+        if self.commanded and len(self.commanded) != e:
+            raise ValueError(f"commanded must be empty or have {e} entries (one per element)")
+        if len(self.drive) != n:
+            raise ValueError(f"drive must name one element per active joint ({n})")
+        for j, el in enumerate(self.drive):
+            if not (0 <= el < e and any(k == j for k, _ in self.coupling[el])):
+                raise ValueError(
+                    f"joint {self.joint_names[j]!r}: its drive element must be coupled to it"
+                )
+            if not self.springs[el][0]:
+                raise ValueError(f"joint {self.joint_names[j]!r}: its drive element has no spring")
+        for i, has in enumerate(self.springs):
+            if any(has) and not self.coupling[i]:
+                raise ValueError(f"element {self.names[i]!r}: a fixed element has no spring")
+        for law in self.laws:
+            if not 0 <= law.joint < n:
+                raise ValueError(f"spring law on joint {law.joint} of {n}")
         for i, p in enumerate(self.parents):
             if not -1 <= p < i:
                 raise ValueError(
@@ -136,12 +175,34 @@ class TreeRobot(eqx.Module):
         return tuple(i for i, c in enumerate(self.coupling) if c)
 
     def coupling_matrix(self) -> np.ndarray:
-        """`(e, n)`: element angles are `coupling_matrix() @ q`."""
+        """`(e, n)`: element angles are `coupling_matrix() @ q` plus the springs'
+        share (`spring_matrix`)."""
         C = np.zeros((len(self.names), self.n_joints))
         for i, c in enumerate(self.coupling):
             for j, k in c:
                 C[i, j] += k
+        for i, c in enumerate(self.commanded):
+            for j, k in c:
+                C[i, j] += k
         return C
+
+    def spring_matrix(self) -> np.ndarray:
+        """`(e, r)`: the share of the joint-spring deflections (`φz` of the moving
+        elements, in `revolute` order) in each element's angle: an element follows the
+        springs of the joints it is coupled to, and its own spring unless it drives a
+        joint (then its spring is that joint's θ, already counted)."""
+        col = {el: r for r, el in enumerate(self.revolute)}
+        B = np.zeros((len(self.names), len(self.revolute)))
+        for i, c in enumerate(self.coupling):
+            for j, k in c:
+                B[i, col[self.drive[j]]] += k
+            if c and i not in self.drive:
+                B[i, col[i]] += 1.0
+        return B
+
+    def spring_mask(self) -> np.ndarray:
+        """`(r, 3)` booleans: which springs `(z, x, y)` each moving element has."""
+        return np.array([self.springs[i] for i in self.revolute], bool).reshape(-1, 3)
 
 
 # -- robot file --------------------------------------------------------------------------
@@ -160,6 +221,8 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "world",
         "gravity_m_per_s2",
         "noise_std_mm",
+        "spring_laws",
+        "experiment",
         "calibration",
     ),
     "elements": (
@@ -171,9 +234,11 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "dh",
         "coupling",
         "compliance_urad_per_Nm",
+        "springs",
+        "commanded_coupling",
     ),
     "dh": ("d_m", "theta_deg", "a_m", "alpha_deg", "beta_deg"),
-    "joints": ("name", "limits_deg"),
+    "joints": ("name", "limits_deg", "element"),
     "masses": ("element", "kg", "at_m"),
     "markers": ("name", "element", "at_m"),
     "world": ("xyz_m", "rpy_deg", "matrix"),
@@ -236,7 +301,8 @@ def tree_from_dict(d: dict) -> TreeRobot:
     jindex = {n: i for i, n in enumerate(joint_names)}
 
     names: list[str] = []
-    parents, couplings, origins, dhs, comps = [], [], [], [], []
+    parents, couplings, origins, dhs, comps, springs = [], [], [], [], [], []
+    commanded: list[tuple[tuple[int, float], ...]] = []
     for i, el in enumerate(d.get("elements", [])):
         where = f"elements[{i}]"
         _check_keys(el, f"{where}.", _KNOWN["elements"])
@@ -267,14 +333,56 @@ def tree_from_dict(d: dict) -> TreeRobot:
             if j not in jindex:
                 raise ValueError(f"robot file: {where}.coupling: unknown joint {j!r}")
         couplings.append(tuple((jindex[j], float(k)) for j, k in coupling.items()))
+        extra = el.get("commanded_coupling", {})
+        if not isinstance(extra, dict) or any(j not in jindex for j in extra):
+            raise ValueError(
+                f"robot file: {where}.commanded_coupling must map joint names to numbers"
+            )
+        if extra and not couplings[-1]:
+            raise ValueError(f"robot file: {where}: commanded_coupling needs a coupling")
+        commanded.append(tuple((jindex[j], float(k)) for j, k in extra.items()))
         c = np.asarray(el.get("compliance_urad_per_Nm", [0.0, 0.0, 0.0]), np.float64)
         if c.shape != (3,):
             raise ValueError(f"robot file: {where}.compliance_urad_per_Nm needs 3 numbers")
         if not couplings[-1] and np.any(c != 0):
             raise ValueError(f"robot file: {where}: a fixed element has no spring")
+        has = el.get("springs", list(_SPRINGS) if couplings[-1] else [])
+        if not isinstance(has, list) or any(a not in _SPRINGS for a in has):
+            raise ValueError(f"robot file: {where}.springs must list some of {list(_SPRINGS)}")
+        if has and not couplings[-1]:
+            raise ValueError(f"robot file: {where}: a fixed element has no spring")
+        springs.append(tuple(a in has for a in _SPRINGS))
+        if np.any(c[~np.array(springs[-1])] != 0):
+            raise ValueError(f"robot file: {where}: a compliance is given for a missing spring")
         comps.append(c * 1e-6)
     if not names:
         raise ValueError("robot file: 'elements' must be a non-empty list")
+    drive = []
+    for j, jn in enumerate(joint_names):
+        ref = joints[j].get("element")
+        if ref is None:
+            alone = [i for i, c in enumerate(couplings) if c == ((j, 1.0),)]
+            if not alone:
+                raise ValueError(
+                    f"robot file: joints[{j}] ({jn!r}): no element is coupled to it alone; "
+                    "name its drive element with 'element'"
+                )
+            drive.append(alone[0])
+            continue
+        if ref not in names or not any(k == j for k, _ in couplings[names.index(ref)]):
+            raise ValueError(
+                f"robot file: joints[{j}].element {ref!r} must be an element coupled to {jn!r}"
+            )
+        drive.append(names.index(ref))
+    for j, el in enumerate(drive):
+        if not springs[el][0]:
+            raise ValueError(
+                f"robot file: element {names[el]!r} drives {joint_names[j]!r} and needs its "
+                "'theta' spring"
+            )
+    laws = d.get("spring_laws", [])
+    if not isinstance(laws, list):
+        raise ValueError("robot file: 'spring_laws' must be a list")
 
     def element(ref: Any, where: str) -> int:
         if ref not in names:
@@ -315,11 +423,35 @@ def tree_from_dict(d: dict) -> TreeRobot:
         mass_element=tuple(mass_el),
         marker_element=tuple(mk_el),
         marker_names=tuple(mk_names),
+        drive=tuple(drive),
+        commanded=tuple(commanded) if any(commanded) else (),
+        experiment=_freeze(d.get("experiment", {})),
+        springs=tuple(springs),
+        laws=tuple(
+            spring_law_from_dict(x, f"spring_laws[{i}]", jindex) for i, x in enumerate(laws)
+        ),
         name=str(d.get("name", "")),
         description=str(d.get("description", "")),
         sources=tuple(str(s) for s in d.get("sources", [])),
         noise_std=float(d.get("noise_std_mm", 1.0)) * 1e-3,
     )
+
+
+def _freeze(x: Any) -> Any:
+    # A hashable copy of a JSON value (static fields of an eqx.Module are hashed).
+    if isinstance(x, dict):
+        return tuple((str(k), _freeze(v)) for k, v in x.items())
+    if isinstance(x, list):
+        return ("__list__", *(_freeze(v) for v in x))
+    return x
+
+
+def _thaw(x: Any) -> Any:
+    if isinstance(x, tuple) and x and x[0] == "__list__":
+        return [_thaw(v) for v in x[1:]]
+    if isinstance(x, tuple):
+        return {k: _thaw(v) for k, v in x}
+    return x
 
 
 def _r(x, nd: int = 12) -> list[float]:
@@ -345,6 +477,10 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         if robot.coupling[i]:
             el["coupling"] = {robot.joint_names[j]: k for j, k in robot.coupling[i]}
             el["compliance_urad_per_Nm"] = _r(c[i] * 1e6, 9)
+            if robot.commanded and robot.commanded[i]:
+                el["commanded_coupling"] = {robot.joint_names[j]: k for j, k in robot.commanded[i]}
+            if not all(robot.springs[i]):
+                el["springs"] = [a for a, h in zip(_SPRINGS, robot.springs[i], strict=True) if h]
         elements.append(el)
     w = np.asarray(robot.world)
     return {
@@ -354,8 +490,14 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         "sources": list(robot.sources),
         "dh_convention": "modified (Craig): Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d) Rz(q)",
         "joints": [
-            {"name": n, "limits_deg": _r(np.degrees(lim), 9)}
-            for n, lim in zip(robot.joint_names, np.asarray(robot.joint_limits), strict=True)
+            {
+                "name": n,
+                "limits_deg": _r(np.degrees(lim), 9),
+                "element": robot.names[robot.drive[j]],
+            }
+            for j, (n, lim) in enumerate(
+                zip(robot.joint_names, np.asarray(robot.joint_limits), strict=True)
+            )
         ],
         "elements": elements,
         "masses": [
@@ -376,16 +518,20 @@ def tree_to_dict(robot: TreeRobot) -> dict:
                 strict=True,
             )
         ],
+        "spring_laws": [spring_law_to_dict(x, robot.joint_names) for x in robot.laws],
         "world": {"xyz_m": _r(w[:3]), "rpy_deg": _r(np.degrees(w[3:]))},
         "gravity_m_per_s2": _r(robot.gravity),
         "noise_std_mm": robot.noise_std * 1e3,
+        **({"experiment": _thaw(robot.experiment)} if robot.experiment else {}),
     }
 
 
 def load_tree(spec: str | Path) -> TreeRobot:
-    """A `TreeRobot` from a built-in preset name (`TREE_PRESETS`) or a robot file path."""
-    if str(spec) in TREE_PRESETS:
-        text = resources.files("jaxcal.robots").joinpath(f"{spec}.json").read_text()
+    """A `TreeRobot` from a built-in preset name (`TREE_PRESETS`) or a robot file path;
+    a file of the quasi-serial form (`geometry_m`, the FANUC's) is read as its tree."""
+    preset = resources.files("jaxcal.robots").joinpath(f"{spec}.json")
+    if "/" not in str(spec) and not str(spec).endswith(".json") and preset.is_file():
+        text = preset.read_text()
         where = f"preset {spec}"
     else:
         path = Path(spec)
@@ -396,6 +542,10 @@ def load_tree(spec: str | Path) -> TreeRobot:
         d = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"robot {where}: not valid JSON ({e})") from None
+    from .quasi_serial import is_quasi_serial, tree_dict_from_quasi_serial
+
+    if is_quasi_serial(d):
+        d = tree_dict_from_quasi_serial(d)
     return tree_from_dict(d)
 
 

@@ -1,11 +1,14 @@
 """Kinematics and elastostatics of a `TreeRobot`: element frames, marker positions in the
 measurement frame, the gravity potential and the static equilibrium of the springs.
 
-The equilibrium minimises the total potential `U(φ) = U_gravity(q, φ) + ½ Σ φ²/κ` over
-the spring deflections φ (three per moving element: about z, x, y). Its stationarity
-condition is written `φ + κ ⊙ ∂U_gravity/∂φ = 0`, which stays well posed when a
-compliance is zero (a rigid spring). optimistix's Newton solves it; derivatives with
-respect to every parameter come from the implicit function theorem (`ImplicitAdjoint`).
+The equilibrium minimises the total potential `U(φ) = V(q, φ) + ½ Σ φ²/κ` over the
+spring deflections φ (three per moving element: about z, x, y), with `V` the gravity of
+the masses, the spring laws and the work of an external force. Its stationarity
+condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
+zero (a rigid spring), and solved as the fixed point `φ = −κ ⊙ ∂V/∂φ` by optimistix
+(the springs are stiff against the load's own stiffness, so the iteration contracts
+fast); derivatives with respect to every parameter come from the implicit function
+theorem (`ImplicitAdjoint`).
 
 All functions handle one configuration; batch with `jax.vmap`.
 """
@@ -29,8 +32,13 @@ __all__ = [
     "element_frames",
     "marker_positions",
     "gravity_potential",
+    "link_angles",
+    "marker_index",
+    "marker_pose",
+    "potential",
     "TreeEquilibrium",
     "tree_equilibrium",
+    "tree_deflection",
     "predict_markers",
 ]
 
@@ -54,10 +62,12 @@ def pose_matrix(R: Float[Array, "3 3"], t: Float[Array, 3]) -> Float[Array, "4 4
 
 
 def _element_transform(origin, dh, angle, phi) -> tuple[Array, Array]:
+    # `angle` holds the joint springs' share already (`spring_matrix`); `phi` the
+    # element's lateral springs.
     d, theta, a, alpha, beta = dh[0], dh[1], dh[2], dh[3], dh[4]
     Ro = rpy_matrix(origin[3:])
     Rab = _mm(_mm(Ro, Rx(alpha)), Ry(beta))
-    R = _mm(_mm(_mm(Rab, Rz(theta + angle + phi[0])), Rx(phi[1])), Ry(phi[2]))
+    R = _mm(_mm(_mm(Rab, Rz(theta + angle)), Rx(phi[1])), Ry(phi[2]))
     # Translation: the origin, then a along the x after Rx(α) (which Rx(α) leaves), then
     # d along the z of Rx(α)·Ry(β)·Rz(...) (which Rz leaves).
     t = origin[:3] + Ro[:, 0] * a + Rab[:, 2] * d
@@ -76,6 +86,7 @@ def element_poses(
     angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q
     springs = jnp.zeros((e, 3), dtype)
     if phi is not None:
+        angles = angles + jnp.asarray(robot.spring_matrix(), dtype) @ phi[:, 0]
         springs = springs.at[jnp.asarray(robot.revolute, int)].set(phi)
     # One scan over the elements in topological order (not a Python loop: the program,
     # and so its trace and compile time, does not grow with the number of elements).
@@ -128,6 +139,54 @@ def gravity_potential(
     return -jnp.sum(robot.mass_kg * _mv(x, robot.gravity))
 
 
+def link_angles(
+    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"]
+) -> Float[Array, " n"]:
+    """Link-side angles `q + θ` (rad) of the active joints, θ the deflection of each
+    joint's drive spring."""
+    rows = [robot.revolute.index(el) for el in robot.drive]
+    return q + phi[jnp.asarray(rows, int), 0]
+
+
+def marker_index(robot: TreeRobot, at: int | str) -> int:
+    """The index of marker `at` (a name or an index), or `ValueError` naming it."""
+    if isinstance(at, str):
+        if at not in robot.marker_names:
+            raise ValueError(f"at: no marker {at!r}; the robot has {list(robot.marker_names)}")
+        return robot.marker_names.index(at)
+    if not 0 <= at < len(robot.marker_names):
+        raise ValueError(f"at: marker index {at} out of range ({len(robot.marker_names)})")
+    return int(at)
+
+
+def marker_pose(
+    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None, at: int
+) -> tuple[Float[Array, "3 3"], Float[Array, 3]]:
+    """Rotation of marker `at`'s element and the marker's position (m), base frame."""
+    R, t = element_poses(robot, q, phi)
+    el = robot.marker_element[at]
+    return R[el], _mv(R[el], robot.marker_at[at]) + t[el]
+
+
+def potential(
+    robot: TreeRobot,
+    q: Float[Array, " n"],
+    phi: Float[Array, "r 3"],
+    force: Float[Array, 3] | None = None,
+    at: int = 0,
+) -> Float[Array, ""]:
+    """The potential (J) whose gradient the springs balance: gravity of the masses,
+    the spring laws, and the work of a `force` (N, base frame) applied at marker `at`.
+    (The springs' own energy is carried by the equilibrium condition.)"""
+    u = gravity_potential(robot, q, phi)
+    if robot.laws:
+        link = link_angles(robot, q, phi)
+        u = u + sum(law.potential(link[law.joint]) for law in robot.laws)
+    if force is not None:
+        u = u - jnp.dot(force, marker_pose(robot, q, phi, at)[1])
+    return u
+
+
 class TreeEquilibrium(eqx.Module):
     """A static equilibrium: spring deflections `phi` `(r, 3)` (rad) and whether the
     solve converged."""
@@ -137,9 +196,21 @@ class TreeEquilibrium(eqx.Module):
 
 
 def _residual(phi, args):
-    robot, q = args
+    robot, q, force, moment, at = args
     compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
-    grad = jax.grad(gravity_potential, argnums=2)(robot, q, phi)
+    compliance = jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
+    grad = jax.grad(potential, argnums=2)(robot, q, phi, force, at)
+    if moment is not None:
+        # The generalised force of a moment M: M·ω per unit deflection, ω the marker
+        # frame's base-frame angular velocity (a finite rotation has no potential).
+        R = marker_pose(robot, q, phi, at)[0]
+        dR = jax.jacfwd(lambda p: marker_pose(robot, q, p, at)[0])(phi)
+        W = jnp.einsum("abrk,cb->rkac", dR, R)
+        omega = 0.5 * jnp.stack(
+            [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+            axis=-1,
+        )
+        grad = grad - omega @ moment
     return phi + compliance * grad
 
 
@@ -147,31 +218,69 @@ def _step(phi, args):
     return phi - _residual(phi, args)
 
 
-def tree_equilibrium(
-    robot: TreeRobot, q: Float[Array, " n"], *, max_steps: int = 32
-) -> TreeEquilibrium:
-    """The spring deflections at which gravity and the springs balance, at commanded
-    angles `q` (rad). Differentiable in every array field of `robot` by the implicit
-    function theorem; never raises (check `converged`)."""
+def _check_load(robot, q, force, moment, at) -> int:
     if q.shape != (robot.n_joints,):
         raise ValueError(f"q must have shape ({robot.n_joints},), got {q.shape}")
+    for name, x in (("force", force), ("moment", moment)):
+        if x is not None and jnp.shape(x) != (3,):
+            raise ValueError(f"{name} must have shape (3,) or be None, got {jnp.shape(x)}")
+    if force is None and moment is None:
+        return 0
+    return marker_index(robot, at)
+
+
+def tree_equilibrium(
+    robot: TreeRobot,
+    q: Float[Array, " n"],
+    *,
+    force: Float[Array, 3] | None = None,
+    moment: Float[Array, 3] | None = None,
+    at: int | str = 0,
+    max_steps: int = 32,
+) -> TreeEquilibrium:
+    """The spring deflections at which gravity, the spring laws, an optional external
+    wrench (`force` N and `moment` N·m in the base frame, applied at marker `at`) and
+    the springs balance, at commanded angles `q` (rad). Differentiable in every array
+    field of `robot` by the implicit function theorem; never raises for values (check
+    `converged`)."""
+    at = _check_load(robot, q, force, moment, at)
     dtype = q.dtype
     tol = 1e-12 if dtype == jnp.float64 else 1e-6
+    args = (robot, q, force, moment, at)
     phi0 = jnp.zeros((len(robot.revolute), 3), dtype)
-    # The rigid robot's deflections are the gravity torques times the compliances: one
-    # fixed-point step gives a start within the spring's second-order effect.
-    phi0 = phi0 - _residual(phi0, (robot, q))
+    # The rigid robot's deflections are the torques times the compliances: one
+    # fixed-point step gives a start within the springs' second-order effect.
+    phi0 = phi0 - _residual(phi0, args)
     sol = optx.fixed_point(
         _step,
         optx.FixedPointIteration(rtol=tol, atol=tol),
         phi0,
-        (robot, q),
+        args,
         max_steps=max_steps,
         throw=False,
         adjoint=optx.ImplicitAdjoint(linear_solver=lu_solver()),
     )
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
     return TreeEquilibrium(phi=sol.value, converged=ok)
+
+
+def tree_deflection(
+    robot: TreeRobot,
+    q: Float[Array, " n"],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+    *,
+    at: int | str = 0,
+) -> tuple[Float[Array, 3], Bool[Array, ""]]:
+    """What a deflection experiment measures: the displacement (m, base frame) of
+    marker `at` when the wrench is applied, loaded minus unloaded (gravity only) at the
+    same commanded angles `q`; and whether both equilibria converged."""
+    i = _check_load(robot, q, force, moment, at)
+    loaded = tree_equilibrium(robot, q, force=force, moment=moment, at=i)
+    free = tree_equilibrium(robot, q)
+    p1 = marker_pose(robot, q, loaded.phi, i)[1]
+    p0 = marker_pose(robot, q, free.phi, i)[1]
+    return p1 - p0, loaded.converged & free.converged
 
 
 def predict_markers(

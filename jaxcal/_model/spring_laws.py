@@ -1,0 +1,110 @@
+"""Spring laws attached to a joint: elastic elements whose potential is a nonlinear
+function of one joint's link-side angle `φ = q + θ` (rad), such as a gravity
+compensator.
+
+A law is an `eqx.Module` whose array fields are its parameters (SI) and whose
+`potential(phi)` is its energy in J; the equilibrium adds it to the total potential, so
+its torque and its tangent stiffness come from autodiff. `SPRING_LAWS` maps the names
+used in robot files to the law classes; a new law is a new class in that table.
+
+The compensator of the paper (eqs. 7–11): a linear spring of stiffness `Kc` (N/m) and
+free length `s0` (m) between two pivots at distances `lc` and `l2` from the joint axis,
+with length `s(φ)² = lc² + l2² − 2·lc·l2·cos φ` and potential `½·Kc·(s − s0)²`; φ = 0
+when the two lever arms are aligned (the FANUC's lower arm vertical).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = [
+    "SpringLaw",
+    "CompensatorLaw",
+    "SPRING_LAWS",
+    "compensator_length",
+    "spring_law_from_dict",
+    "spring_law_to_dict",
+]
+
+
+def compensator_length(lc: ArrayLike, l2: ArrayLike, phi: ArrayLike) -> Array:
+    """Compensator spring length `s(φ)` in m (paper eq. 7): the spring spans the triangle
+    of the two lever arms `lc`, `l2` (m) at the angle `phi` (rad)."""
+    return jnp.sqrt(lc**2 + l2**2 - 2.0 * lc * l2 * jnp.cos(phi))
+
+
+class SpringLaw(eqx.Module):
+    """A spring law acting on the link-side angle of the active joint `joint` (index in
+    the robot's `joint_names`)."""
+
+    joint: eqx.AbstractVar[int]
+    #: The parameters' robot-file keys, each `(key, field, factor from SI)`.
+    keys: ClassVar[tuple[tuple[str, str, float], ...]] = ()
+    law: ClassVar[str] = ""
+
+    def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
+        """Energy (J) at the link-side angle `phi` (rad)."""
+        raise NotImplementedError
+
+
+class CompensatorLaw(SpringLaw):
+    """The paper's spring gravity compensator (eqs. 7–11)."""
+
+    lc: Float[Array, ""]
+    l2: Float[Array, ""]
+    Kc: Float[Array, ""]
+    s0: Float[Array, ""]
+    joint: int = eqx.field(static=True)
+    keys: ClassVar[tuple[tuple[str, str, float], ...]] = (
+        ("lc_m", "lc", 1.0),
+        ("l2_m", "l2", 1.0),
+        ("Kc_N_per_m", "Kc", 1.0),
+        ("s0_m", "s0", 1.0),
+    )
+    law: ClassVar[str] = "compensator"
+
+    def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
+        s = compensator_length(self.lc, self.l2, phi)
+        return 0.5 * self.Kc * (s - self.s0) ** 2
+
+
+SPRING_LAWS: dict[str, type[SpringLaw]] = {"compensator": CompensatorLaw}
+
+
+def spring_law_from_dict(d: dict, where: str, joints: dict[str, int]) -> SpringLaw:
+    """A law from its robot-file entry `{"law": ..., "joint": ..., <parameters>}`; every
+    problem raises `ValueError` naming `where`."""
+    if not isinstance(d, dict):
+        raise ValueError(f"robot file: {where} must be an object")
+    name = d.get("law")
+    if name not in SPRING_LAWS:
+        raise ValueError(f"robot file: {where}.law {name!r} unknown; known: {sorted(SPRING_LAWS)}")
+    cls = SPRING_LAWS[name]
+    allowed = {"law", "joint", *(k for k, _, _ in cls.keys)}
+    for k in d:
+        if k not in allowed:
+            raise ValueError(f"robot file: unknown key {where}.{k!r} for law {name!r}")
+    if d.get("joint") not in joints:
+        raise ValueError(f"robot file: {where}.joint {d.get('joint')!r} is not an active joint")
+    kwargs = {}
+    for key, field, factor in cls.keys:
+        if key not in d:
+            raise ValueError(f"robot file: {where}.{key} missing (law {name!r})")
+        try:
+            kwargs[field] = jnp.asarray(np.float64(float(d[key]) / factor))
+        except (TypeError, ValueError):
+            raise ValueError(f"robot file: {where}.{key} must be a number") from None
+    return cls(joint=joints[d["joint"]], **kwargs)
+
+
+def spring_law_to_dict(law: SpringLaw, joint_names: tuple[str, ...]) -> dict:
+    """The robot-file entry of `law` (inverse of `spring_law_from_dict`)."""
+    out: dict = {"law": law.law, "joint": joint_names[law.joint]}
+    for key, field, factor in law.keys:
+        out[key] = float(getattr(law, field)) * factor
+    return out

@@ -1,0 +1,177 @@
+"""The FANUC-like quasi-serial robot written as a kinematic tree (one general model):
+
+- its deflections reproduce the independent reference data (≤ 0.5 µm);
+- its equilibrium (joint deflections and tool displacement, with a tool moment too)
+  equals the quasi-serial model's at random configurations (hypothesis), with and
+  without the parallelogram and the compensator;
+- derivatives through the equilibrium with respect to the compensator's parameters
+  equal the quasi-serial model's and finite differences;
+- the tree robot file round-trips, and robot-file faults get named errors.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import jaxcal
+
+DATA = Path(__file__).parent / "data"
+
+
+def _spec() -> dict:
+    return jaxcal.robot_to_dict(jaxcal.load_robot("fanuc_m900ib700"))
+
+
+def _pair(**changes):
+    d = _spec()
+    d.update(changes)
+    return jaxcal.robot_from_dict(d), jaxcal.tree_from_dict(jaxcal.tree_dict_from_quasi_serial(d))
+
+
+@pytest.fixture(scope="module")
+def fanuc():
+    return _pair()
+
+
+def _tree_fn(tree):
+    def one(q, f, m):
+        dp, ok = jaxcal.tree_deflection(tree, q, f, m, at="tool")
+        eq = jaxcal.tree_equilibrium(tree, q, force=f, moment=m, at="tool")
+        return dp, jaxcal.link_angles(tree, q, eq.phi) - q, ok & eq.converged
+
+    return jax.jit(one)
+
+
+@pytest.fixture(scope="module")
+def tree_fn(fanuc):
+    return _tree_fn(fanuc[1])
+
+
+def test_reference_deflections(fanuc):
+    rows = list(csv.DictReader((DATA / "reference_deflections.csv").open()))
+
+    def col(*keys):
+        return np.array([[float(r[k]) for k in keys] for r in rows])
+
+    q = np.radians(col(*(f"q{i}_deg" for i in range(1, 7))))
+    f, m = col("fx_N", "fy_N", "fz_N"), col("mx_Nm", "my_Nm", "mz_Nm")
+    dp, ok = jax.vmap(lambda a, b, c: jaxcal.tree_deflection(fanuc[1], a, b, c, at="tool"))(
+        jnp.asarray(q), jnp.asarray(f), jnp.asarray(m)
+    )
+    assert bool(jnp.all(ok))
+    err_um = np.abs(np.asarray(dp) * 1e3 - col("dx_mm", "dy_mm", "dz_mm")) * 1e3
+    assert err_um.max() <= 0.5, err_um.max()
+
+
+_angle = st.floats(-1.0, 1.0)
+_load = st.floats(-8000.0, 8000.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.lists(_angle, min_size=6, max_size=6),
+    st.lists(_load, min_size=3, max_size=3),
+    st.lists(st.floats(-3000.0, 3000.0), min_size=3, max_size=3),
+)
+def test_equals_quasi_serial_model(fanuc, tree_fn, q, f, m):
+    robot, _ = fanuc
+    lo, hi = np.radians(
+        [[-180, 180], [-30, 90], [-30, 30], [-360, 360], [-120, 120], [-360, 360]]
+    ).T
+    q = jnp.asarray(lo + (np.asarray(q) + 1) / 2 * (hi - lo))
+    f, m = jnp.asarray(f), jnp.asarray(m)
+    dp, theta, ok = tree_fn(q, f, m)
+    assert bool(ok)
+    np.testing.assert_allclose(dp, jaxcal.deflection(robot, q, f, m), atol=1e-10)
+    np.testing.assert_allclose(theta, jaxcal.equilibrium(robot, q, f, m)[:6], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "changes", [{"parallelogram": False}, {"compensator": None}], ids=["serial", "no-compensator"]
+)
+def test_variants_equal_quasi_serial_model(changes):
+    robot, tree = _pair(**changes)
+    fn = _tree_fn(tree)
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        q = jnp.asarray(rng.uniform(-0.5, 0.5, 6))
+        f, m = jnp.asarray(rng.normal(0, 3000, 3)), jnp.asarray(rng.normal(0, 1000, 3))
+        dp, theta, ok = fn(q, f, m)
+        assert bool(ok)
+        np.testing.assert_allclose(dp, jaxcal.deflection(robot, q, f, m), atol=1e-10)
+        np.testing.assert_allclose(theta, jaxcal.equilibrium(robot, q, f, m)[:6], atol=1e-12)
+
+
+def test_compensator_derivatives(fanuc):
+    robot, tree = fanuc
+    q = jnp.radians(jnp.array([20.0, 40.0, -10.0, 30.0, 50.0, 10.0]))
+    f = jnp.array([1000.0, -500.0, -6000.0])
+
+    def tree_dp(kc, s0):
+        law = eqx.tree_at(lambda x: (x.Kc, x.s0), tree.laws[0], (kc, s0))
+        t = eqx.tree_at(lambda r: r.laws, tree, (law,))
+        return jaxcal.tree_deflection(t, q, f, at="tool")[0]
+
+    def spec_dp(kc, s0):
+        return jaxcal.deflection(eqx.tree_at(lambda r: (r.Kc, r.s0), robot, (kc, s0)), q, f)
+
+    x = (tree.laws[0].Kc, tree.laws[0].s0)
+    jt = jax.jacfwd(tree_dp, argnums=(0, 1))(*x)
+    js = jax.jacfwd(spec_dp, argnums=(0, 1))(*x)
+    for a, b, h in zip(jt, js, (1e2, 1e-5), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-18 / h)
+    # Central differences in each parameter: truncation O(h²), round-off O(ε·|Δp|/h).
+    for i, h in ((0, 1e2), (1, 1e-5)):
+        up, dn = list(x), list(x)
+        up[i], dn[i] = x[i] + h, x[i] - h
+        fd = (tree_dp(*up) - tree_dp(*dn)) / (2 * h)
+        np.testing.assert_allclose(jt[i], fd, rtol=1e-5, atol=1e-6 * float(jnp.abs(jt[i]).max()))
+
+
+def test_round_trip(fanuc, tree_fn):
+    tree = fanuc[1]
+    again = jaxcal.tree_from_dict(json.loads(json.dumps(jaxcal.tree_to_dict(tree))))
+    assert again.drive == tree.drive and again.springs == tree.springs
+    assert again.laws[0].law == "compensator"
+    q, f = jnp.asarray([0.1, 0.3, -0.2, 0.4, 0.5, 0.6]), jnp.asarray([0.0, 0.0, -5000.0])
+    np.testing.assert_allclose(
+        jaxcal.tree_deflection(again, q, f, at="tool")[0],
+        tree_fn(q, f, jnp.zeros(3))[0],
+        atol=1e-13,
+    )
+
+
+def test_preset_by_name(fanuc):
+    assert jaxcal.load_tree("fanuc_m900ib700").names == fanuc[1].names
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda d: d["spring_laws"][0].update(law="cubic"), "spring_laws[0].law"),
+        (lambda d: d["spring_laws"][0].pop("Kc_N_per_m"), "spring_laws[0].Kc_N_per_m"),
+        (lambda d: d["spring_laws"][0].update(joint="q9"), "spring_laws[0].joint"),
+        (lambda d: d["joints"][2].pop("element"), "joints[2]"),
+        (lambda d: d["elements"][5].update(compliance_urad_per_Nm=[1, 0, 0]), "elements[5]"),
+        (
+            lambda d: d["elements"][0].update(springs=["alpha"], compliance_urad_per_Nm=[0, 0, 0]),
+            "theta",
+        ),
+    ],
+)
+def test_bad_tree_files(edit, words):
+    d = copy.deepcopy(jaxcal.tree_dict_from_quasi_serial(_spec()))
+    edit(d)
+    with pytest.raises(ValueError) as e:
+        jaxcal.tree_from_dict(d)
+    assert words in str(e.value), str(e.value)
