@@ -152,6 +152,10 @@ from ._model.tree_statics import (
     tree_deflection as tree_deflection,
     tree_equilibrium as tree_equilibrium,
 )
+from ._model.urdf import (
+    load_urdf as load_urdf,
+    tree_dict_from_urdf as tree_dict_from_urdf,
+)
 from ._parameters import (
     get_parameters as get_parameters,
     parameter_names as parameter_names,
