@@ -37,6 +37,10 @@ from ._identification.lsq import (
     LsqFit as LsqFit,
     nonlinear_fit as nonlinear_fit,
 )
+from ._identification.measurement_kinds import (
+    KindComparison as KindComparison,
+    compare_measurement_kinds as compare_measurement_kinds,
+)
 from ._identification.method import (
     AbstractMethod as AbstractMethod,
     LinearMethod as LinearMethod,
@@ -126,6 +130,10 @@ from ._model.observation import (
 from ._model.quasi_serial import (
     tree_dict_from_quasi_serial as tree_dict_from_quasi_serial,
 )
+from ._model.robot_files import (
+    TREE_PRESETS as TREE_PRESETS,
+    load_tree as load_tree,
+)
 from ._model.simulate import (
     DeflectionError as DeflectionError,
     model_deflections as model_deflections,
@@ -137,9 +145,7 @@ from ._model.spring_laws import (
     SpringLaw as SpringLaw,
 )
 from ._model.tree import (
-    TREE_PRESETS as TREE_PRESETS,
     TreeRobot as TreeRobot,
-    load_tree as load_tree,
     tree_from_dict as tree_from_dict,
     tree_to_dict as tree_to_dict,
 )

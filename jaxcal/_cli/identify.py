@@ -76,7 +76,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._identification.identify import identify
     from .._io import read_dataset
-    from .._model.tree import is_tree_file
+    from .._model.robot_files import is_tree_file
     from .._robot import load_robot
 
     if is_tree_file(args.robot):

@@ -43,8 +43,8 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
+    from .._model.robot_files import is_tree_file
     from .._model.simulate import simulate
-    from .._model.tree import is_tree_file
     from .._robot import load_robot
 
     if is_tree_file(args.robot):

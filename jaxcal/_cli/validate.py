@@ -29,16 +29,16 @@ PUBLISHED = {
 
 
 def register(sub) -> None:
-    from .._identification.parameter_groups import GROUPS
+    from .._identification.parameter_groups import DEFAULT_GROUPS, GROUPS
 
     p = sub.add_parser(
         "validate",
         help="calibrate on part of an absolute-measurement file, report held-out errors",
         description=(
             "Hold out --test rows (drawn by --seed), calibrate the robot on the others "
-            "adding the parameter groups in turn (" + ", ".join(GROUPS) + "), and print the "
-            "mean, std and max 3-D marker error (mm) on the held-out rows after each; with "
-            "--folds K, K disjoint test sets instead. For Agile Justin the published "
+            "adding the parameter groups in turn (" + ", ".join(DEFAULT_GROUPS) + "), and "
+            "print the mean, std and max 3-D marker error (mm) on the held-out rows after "
+            "each; with --folds K, K disjoint test sets instead. For Agile Justin the published "
             "figures are printed beside."
         ),
     )
@@ -55,7 +55,11 @@ def register(sub) -> None:
         "--params",
         default=None,
         metavar="GROUPS",
-        help="comma-separated groups to add, in the order " + ",".join(GROUPS) + " (default all)",
+        help="comma-separated groups to add, in the order "
+        + ",".join(GROUPS)
+        + " (default "
+        + ",".join(DEFAULT_GROUPS)
+        + ")",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -63,7 +67,7 @@ def register(sub) -> None:
 
 def _load(args):
     from .._markers import read_markers
-    from .._model.tree import load_tree
+    from .._model.robot_files import load_tree
 
     robot = load_tree(args.robot)
     return robot, read_markers(args.data, robot)
@@ -242,7 +246,7 @@ def simulate_tree(args: argparse.Namespace) -> int:
     """`jaxcal simulate` for a tree robot: the model's marker positions at the file's poses."""
     from .._identification.elastogeometric import predicted_markers
     from .._markers import read_markers, write_markers
-    from .._model.tree import load_tree
+    from .._model.robot_files import load_tree
 
     check_output_path(args.output, "-o")
     robot = load_tree(args.robot)

@@ -27,7 +27,7 @@ from .._model.tree import TreeRobot
 from .._model.tree_statics import predict_markers
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
-from .parameter_groups import GROUPS, Parameter, get_vector, parameter_table, set_vector
+from .parameter_groups import DEFAULT_GROUPS, Parameter, get_vector, parameter_table, set_vector
 
 __all__ = [
     "TreeCalibration",
@@ -163,7 +163,7 @@ def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
 def calibrate_tree(
     robot: TreeRobot,
     data: MarkerData,
-    groups: tuple[str, ...] = GROUPS,
+    groups: tuple[str, ...] = DEFAULT_GROUPS,
     *,
     fit_groups: tuple[str, ...] | None = None,
     hold: tuple[str, ...] = (),
@@ -273,7 +273,7 @@ def validate_tree(
     robot: TreeRobot,
     train: MarkerData,
     test: MarkerData,
-    groups: tuple[str, ...] = GROUPS,
+    groups: tuple[str, ...] = DEFAULT_GROUPS,
     *,
     progress=None,
 ) -> list[Stage]:

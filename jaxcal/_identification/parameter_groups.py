@@ -11,7 +11,11 @@ Groups, in the order a calibration adds them:
 - `joint-offsets`: θ of each moving element;
 - `dh`: d, a, α of each moving element;
 - `joint-compliance`: the spring about each joint axis, κθ;
-- `lateral-compliance`: the two springs about the perpendicular axes, κα, κβ.
+- `lateral-compliance`: the two springs about the perpendicular axes, κα, κβ;
+- `masses`: each point mass (kg);
+- `spring-laws`: the parameters of each spring law (e.g. a compensator's Kc, s0);
+
+(springs only where the robot has them: `TreeRobot.springs`).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from .._model.tree import TreeRobot
 
 __all__ = [
     "GROUPS",
+    "DEFAULT_GROUPS",
     "PARAMETER_GROUPS",
     "Parameter",
     "parameter_table",
@@ -41,7 +46,13 @@ GROUPS: tuple[str, ...] = (
     "dh",
     "joint-compliance",
     "lateral-compliance",
+    "masses",
+    "spring-laws",
 )
+#: The full calibration when no groups are named: geometry and springs. Masses and
+#: spring-law parameters are fitted on request: under the robot's weight alone a mass
+#: and the compliances it loads move the markers together.
+DEFAULT_GROUPS: tuple[str, ...] = GROUPS[:5]
 #: The public name of `GROUPS`.
 PARAMETER_GROUPS = GROUPS
 
@@ -93,6 +104,8 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                 out.append(Parameter(f"{n}.alpha", g, "dh", (e, 3), "deg", deg, _MRAD))
         elif g == "joint-compliance":
             for e in moving:
+                if not robot.springs[e][0]:
+                    continue
                 out.append(
                     Parameter(
                         f"{robot.names[e]}.k_theta",
@@ -104,9 +117,31 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                         _COMP,
                     )
                 )
+        elif g == "masses":
+            for k, e in enumerate(robot.mass_element):
+                out.append(
+                    Parameter(f"{robot.names[e]}.mass{k}", g, "mass_kg", (k,), "kg", 1.0, 1.0)
+                )
+        elif g == "spring-laws":
+            for k, law in enumerate(robot.laws):
+                for key, field, factor in law.keys:
+                    typical = max(abs(float(getattr(law, field))) * 1e-2, 1e-6)
+                    out.append(
+                        Parameter(
+                            f"{law.law}{k}.{field}",
+                            g,
+                            f"laws.{k}.{field}",
+                            (),
+                            key[len(field) + 1 :].replace("_per_", "/"),
+                            factor,
+                            typical,
+                        )
+                    )
         else:
             for e in moving:
                 for i, a in ((1, "alpha"), (2, "beta")):
+                    if not robot.springs[e][i]:
+                        continue
                     out.append(
                         Parameter(
                             f"{robot.names[e]}.k_{a}",
@@ -135,11 +170,19 @@ def _where(table: tuple[Parameter, ...]) -> dict[str, tuple[np.ndarray, tuple[np
     }
 
 
+def _field(robot: TreeRobot, path: str):
+    # A field of the robot or of one of its parts (`laws.0.Kc`).
+    obj = robot
+    for part in path.split("."):
+        obj = obj[int(part)] if part.isdigit() else getattr(obj, part)
+    return obj
+
+
 def get_vector(robot: TreeRobot, table: tuple[Parameter, ...]) -> Float[Array, " P"]:
     """The values (SI) of `table`'s parameters in `robot`."""
     out = jnp.zeros(len(table), robot.dh.dtype)
     for f, (pos, ix) in _where(table).items():
-        out = out.at[pos].set(getattr(robot, f)[ix])
+        out = out.at[pos].set(jnp.reshape(_field(robot, f)[ix], pos.shape))
     return out
 
 
@@ -147,15 +190,24 @@ def set_vector(robot: TreeRobot, table: tuple[Parameter, ...], p: Float[Array, "
     """`robot` with `table`'s parameters set to `p` (SI); traceable."""
     where = _where(table)
     fields = tuple(where)
-    new = tuple(getattr(robot, f).at[where[f][1]].set(p[where[f][0]]) for f in fields)
-    return eqx.tree_at(lambda r: tuple(getattr(r, f) for f in fields), robot, new)
+
+    def new(f):
+        old = jnp.asarray(_field(robot, f))
+        pos, ix = where[f]
+        if old.ndim == 0:  # a scalar field: one parameter
+            return p[pos[0]].astype(old.dtype)
+        return old.at[ix].set(p[pos].astype(old.dtype))
+
+    return eqx.tree_at(
+        lambda r: tuple(_field(r, f) for f in fields), robot, tuple(new(f) for f in fields)
+    )
 
 
 def parse_groups(text: str | None) -> tuple[str, ...]:
     """`--params` text (comma-separated group names) to a tuple in `GROUPS` order;
-    `None` or empty: every group."""
+    `None` or empty: `DEFAULT_GROUPS`."""
     if not text:
-        return GROUPS
+        return DEFAULT_GROUPS
     names = [s.strip() for s in text.split(",") if s.strip()]
     unknown = [n for n in names if n not in GROUPS]
     if unknown:

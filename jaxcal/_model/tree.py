@@ -21,9 +21,12 @@ may carry a joint spring of its own, added to its angle.
 
 The elastic elements are virtual springs at the moving elements: one about the joint
 axis (compliance `κθ`) and two lateral ones about the element's x and y axes (`κα`,
-`κβ`), all turning with the link after the joint's motion:
+`κβ`), by default turning with the link after the joint's motion:
 
     ... · Rz(Σ c_j (q_j + θ_j) + φz) · Rx(φx) · Ry(φy)
+
+or, with `"lateral_springs": "before-joint"`, tilting the joint axis itself (fixed to
+the link before the joint): `... · Ry(β) · Rx(φx) · Ry(φy) · Rz(θ + ...) · Trans_z(d)`.
 
 Which of its three springs an element has is part of the topology (`springs`): all
 three by default. Spring laws (`spring_laws.py`, e.g. a gravity compensator) act on a
@@ -36,10 +39,7 @@ its key names. Array fields are what one identifies; topology is plain Python.
 from __future__ import annotations
 
 import difflib
-import json
 import math
-from importlib import resources
-from pathlib import Path
 from typing import Any
 
 import equinox as eqx
@@ -49,10 +49,7 @@ from jaxtyping import Array, Float
 
 from .spring_laws import SpringLaw, spring_law_from_dict, spring_law_to_dict
 
-__all__ = ["TreeRobot", "tree_from_dict", "tree_to_dict", "load_tree", "TREE_PRESETS"]
-
-#: Built-in general robot presets (files in `jaxcal/robots/`).
-TREE_PRESETS: tuple[str, ...] = ("dlr_agile_justin",)
+__all__ = ["TreeRobot", "tree_from_dict", "tree_to_dict"]
 
 G = 9.80665  # m/s², standard gravity
 _SPRINGS = ("theta", "alpha", "beta")  # the robot file's names of an element's springs
@@ -106,6 +103,7 @@ class TreeRobot(eqx.Module):
     laws: tuple[SpringLaw, ...] = ()
     commanded: tuple[tuple[tuple[int, float], ...], ...] = eqx.field(static=True, default=())
     experiment: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=())
+    lateral_before_joint: bool = eqx.field(static=True, default=False)
     name: str = eqx.field(static=True, default="")
     description: str = eqx.field(static=True, default="")
     sources: tuple[str, ...] = eqx.field(static=True, default=())
@@ -222,6 +220,7 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "gravity_m_per_s2",
         "noise_std_mm",
         "spring_laws",
+        "lateral_springs",
         "experiment",
         "calibration",
     ),
@@ -426,6 +425,7 @@ def tree_from_dict(d: dict) -> TreeRobot:
         drive=tuple(drive),
         commanded=tuple(commanded) if any(commanded) else (),
         experiment=_freeze(d.get("experiment", {})),
+        lateral_before_joint=_lateral(d.get("lateral_springs", "after-joint")),
         springs=tuple(springs),
         laws=tuple(
             spring_law_from_dict(x, f"spring_laws[{i}]", jindex) for i, x in enumerate(laws)
@@ -435,6 +435,14 @@ def tree_from_dict(d: dict) -> TreeRobot:
         sources=tuple(str(s) for s in d.get("sources", [])),
         noise_std=float(d.get("noise_std_mm", 1.0)) * 1e-3,
     )
+
+
+def _lateral(x: Any) -> bool:
+    if x not in ("after-joint", "before-joint"):
+        raise ValueError(
+            f"robot file: lateral_springs must be 'after-joint' or 'before-joint', got {x!r}"
+        )
+    return x == "before-joint"
 
 
 def _freeze(x: Any) -> Any:
@@ -523,37 +531,5 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         "gravity_m_per_s2": _r(robot.gravity),
         "noise_std_mm": robot.noise_std * 1e3,
         **({"experiment": _thaw(robot.experiment)} if robot.experiment else {}),
+        **({"lateral_springs": "before-joint"} if robot.lateral_before_joint else {}),
     }
-
-
-def load_tree(spec: str | Path) -> TreeRobot:
-    """A `TreeRobot` from a built-in preset name (`TREE_PRESETS`) or a robot file path;
-    a file of the quasi-serial form (`geometry_m`, the FANUC's) is read as its tree."""
-    preset = resources.files("jaxcal.robots").joinpath(f"{spec}.json")
-    if "/" not in str(spec) and not str(spec).endswith(".json") and preset.is_file():
-        text = preset.read_text()
-        where = f"preset {spec}"
-    else:
-        path = Path(spec)
-        if not path.is_file():
-            raise ValueError(f"robot {spec}: no such file or preset")
-        text, where = path.read_text(), str(path)
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise ValueError(f"robot {where}: not valid JSON ({e})") from None
-    from .quasi_serial import is_quasi_serial, tree_dict_from_quasi_serial
-
-    if is_quasi_serial(d):
-        d = tree_dict_from_quasi_serial(d)
-    return tree_from_dict(d)
-
-
-def is_tree_file(spec: str | Path) -> bool:
-    """Whether a preset name or robot file describes a `TreeRobot` (`"kind": "tree"`)."""
-    if str(spec) in TREE_PRESETS:
-        return True
-    try:
-        return json.loads(Path(spec).read_text()).get("kind") == "tree"
-    except (OSError, ValueError, AttributeError):
-        return False

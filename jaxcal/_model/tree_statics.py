@@ -61,13 +61,19 @@ def pose_matrix(R: Float[Array, "3 3"], t: Float[Array, 3]) -> Float[Array, "4 4
     return jnp.concatenate([top, jnp.array([[0.0, 0.0, 0.0, 1.0]], R.dtype)], axis=0)
 
 
-def _element_transform(origin, dh, angle, phi) -> tuple[Array, Array]:
+def _element_transform(origin, dh, angle, phi, before: bool) -> tuple[Array, Array]:
     # `angle` holds the joint springs' share already (`spring_matrix`); `phi` the
-    # element's lateral springs.
+    # element's lateral springs, turning with the link after the joint's motion or, with
+    # `before`, tilting the joint axis itself.
     d, theta, a, alpha, beta = dh[0], dh[1], dh[2], dh[3], dh[4]
     Ro = rpy_matrix(origin[3:])
     Rab = _mm(_mm(Ro, Rx(alpha)), Ry(beta))
-    R = _mm(_mm(_mm(Rab, Rz(theta + angle)), Rx(phi[1])), Ry(phi[2]))
+    lateral = _mm(Rx(phi[1]), Ry(phi[2]))
+    if before:
+        Rab = _mm(Rab, lateral)
+        R = _mm(Rab, Rz(theta + angle))
+    else:
+        R = _mm(_mm(Rab, Rz(theta + angle)), lateral)
     # Translation: the origin, then a along the x after Rx(α) (which Rx(α) leaves), then
     # d along the z of Rx(α)·Ry(β)·Rz(...) (which Rz leaves).
     t = origin[:3] + Ro[:, 0] * a + Rab[:, 2] * d
@@ -98,7 +104,7 @@ def element_poses(
     def body(carry, x):
         Rs, ts = carry
         i, parent, origin, dh, angle, spring = x
-        R, t = _element_transform(origin, dh, angle, spring)
+        R, t = _element_transform(origin, dh, angle, spring, robot.lateral_before_joint)
         R, t = _mm(Rs[parent], R), ts[parent] + _mv(Rs[parent], t)
         return (Rs.at[i].set(R), ts.at[i].set(t)), None
 
