@@ -136,6 +136,10 @@ def _live_singular(J: np.ndarray, vectors: bool):
     if live.shape[1] == 0:
         return dead, np.zeros(0), np.zeros((0, 0))
     Js = live / np.linalg.norm(live, axis=0)
+    if Js.shape[0] > Js.shape[1]:
+        # A tall matrix has the singular values and right vectors of its triangle R:
+        # memory and time linear in the rows (the full SVD's left factor is rows²).
+        Js = np.linalg.qr(Js, mode="r")
     if vectors:
         _, s, vt = np.linalg.svd(Js, full_matrices=True)
     else:
