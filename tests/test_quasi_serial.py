@@ -27,6 +27,7 @@ from hypothesis import given, settings, strategies as st
 
 import jaxcal
 from jaxcal.internal import get_vector, set_vector
+from jaxcal.internal.cli import main
 
 DATA = Path(__file__).parent / "data"
 
@@ -180,24 +181,23 @@ def test_bad_tree_files(edit, words):
     assert words in str(e.value), str(e.value)
 
 
-def test_absolute_measurements_determine_the_compensator(fanuc):
+def test_absolute_measurements_determine_the_compensator(capsys):
     """Deflections see the compensator only through its ≈ 0.5 % share of joint 2's
     stiffness; absolute positions of the same poses (loaded and unloaded) see its
-    torque, even with the frame and the geometry fitted alongside."""
-    tree = fanuc[1]
-    rows = list(csv.DictReader((DATA / "example_calibration.csv").open()))
-    q = np.radians([[float(r[f"q{i}_deg"]) for i in range(1, 7)] for r in rows])
-    f = np.array([[float(r[k]) for k in ("fx_N", "fy_N", "fz_N")] for r in rows])
-    c = jaxcal.compare_measurement_kinds(
-        tree, q, f, sigma=2e-5, at="tool", hold=("compensator0.lc", "compensator0.l2")
-    )
-    names = [p.name for p in c.parameters]
-    assert names[-2:] == ["compensator0.Kc", "compensator0.s0"]
-    rel_abs, rel_def = c.std_absolute / c.value, c.std_deflection / c.value
-    assert c.geometry_fitted > 9  # the frame, the marker and geometric errors
-    assert np.all(rel_abs < 0.1), dict(zip(names, rel_abs, strict=True))
-    # Kc: undetermined (NaN) or at least ten times worse from deflections.
-    assert not rel_def[-2] <= 10 * rel_abs[-2], (rel_def[-2], rel_abs[-2])
+    torque, even with the frame and the geometry fitted alongside
+    (`jaxcal evaluate --absolute`)."""
+    plan = str(DATA / "example_calibration.csv")
+    args = ["evaluate", plan, "--absolute", "--bound-pool", "0", "--json"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)["absolute_vs_deflection"]
+    rows = {r["name"]: r for r in out["rows"]}
+    assert list(rows)[-2:] == ["compensator0.Kc", "compensator0.s0"]
+    assert out["geometry_fitted"] > 9  # the frame, the marker and geometric errors
+    for name, r in rows.items():
+        assert r["std_absolute"] < 0.1 * r["nominal"], (name, r)
+    # Kc: undetermined (null) or at least ten times worse from deflections.
+    kc = rows["compensator0.Kc"]
+    assert kc["std_deflection"] is None or kc["std_deflection"] > 10 * kc["std_absolute"], kc
 
 
 def test_lateral_springs_before_or_after_the_joint():

@@ -169,6 +169,13 @@ def register(sub) -> None:
         help="candidates of the approximate-design bound (2000; 0: none); computed when "
         "every load is the experiment's test load, vertical or across the arm",
     )
+    e.add_argument(
+        "--absolute",
+        action="store_true",
+        help="also predict each spring's and spring law's std from absolute marker "
+        "measurements of the same poses (loaded and unloaded, frame and geometry fitted "
+        "alongside), beside the deflections' std",
+    )
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=run_evaluate)
 
@@ -455,9 +462,11 @@ def run_evaluate(args: argparse.Namespace) -> int:
     }
     crit["logdet_relative"] = float(rel.logdet)
     excluded = [n for n in robot.parameter_names if pset == "physical" and n not in rel.names]
+    kinds = _absolute_vs_deflection(args.robot, data) if args.absolute else None
     if args.json:
         print_json(
             {
+                **({"absolute_vs_deflection": kinds} if kinds is not None else {}),
                 "parameters": args.parameters,
                 "model": model,
                 "configs": len(data),
@@ -497,4 +506,54 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if feasible is not None:
         bad = {k: v for k, v in violations.items() if v}
         print(f"\nfeasible: {feasible}" + (f"  violated (rows): {bad}" if bad else ""))
+    if kinds is not None:
+        print(
+            f"\nthe same poses measured as deflections or as absolute positions "
+            f"(σ {kinds['sigma_mm']:.3g} mm per coordinate; absolute: loaded and unloaded, "
+            f"{kinds['geometry_fitted']} frame and geometric parameters fitted alongside)"
+        )
+        print(
+            format_table(
+                ["parameter", "unit", "nominal", "std deflection", "std absolute"],
+                [
+                    [r["name"], r["unit"], r["nominal"], r["std_deflection"], r["std_absolute"]]
+                    for r in kinds["rows"]
+                ],
+            )
+        )
     return 0
+
+
+def _absolute_vs_deflection(robot_spec, data) -> dict:
+    """The `--absolute` table: std of the springs and spring laws (robot-file units)
+    from the plan's deflections and from absolute measurements of the same poses."""
+    from .._identification.measurement_kinds import compare_measurement_kinds
+    from .._model.robot_files import load_tree
+
+    tree = load_tree(robot_spec)
+    sigma = float(np.median(np.asarray(data.sigma)))
+    # The compensator's lever arms are geometry the robot file fixes, as in `identify`.
+    hold = tuple(
+        f"{law.law}{k}.{f}"
+        for k, law in enumerate(tree.laws)
+        for f in ("lc", "l2")
+        if law.law == "compensator"
+    )
+    c = compare_measurement_kinds(
+        tree, data.q, data.force, data.moment, sigma=sigma, at=tree.marker_names[0], hold=hold
+    )
+
+    def num(x: float) -> float | None:
+        return None if not np.isfinite(x) else float(x)
+
+    rows = [
+        {
+            "name": p.name,
+            "unit": p.unit,
+            "nominal": float(v * p.factor),
+            "std_deflection": num(a * p.factor),
+            "std_absolute": num(b * p.factor),
+        }
+        for p, v, a, b in zip(c.parameters, c.value, c.std_deflection, c.std_absolute, strict=True)
+    ]
+    return {"sigma_mm": sigma * 1e3, "geometry_fitted": c.geometry_fitted, "rows": rows}
