@@ -11,6 +11,7 @@ import contextlib
 import csv
 import math
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,6 +29,8 @@ __all__ = [
     "read_dataset",
     "write_dataset",
     "atomic_file",
+    "save_figure",
+    "OutputError",
     "input_cells",
     "DataError",
     "configurations",
@@ -299,20 +302,54 @@ def read_dataset(
     )
 
 
+class OutputError(OSError):
+    """A file could not be written (full disk, no permission, ...); the message names
+    the file and the cause. Any previous file of that name is left as it was."""
+
+
+def _new_file_mode(path: Path) -> int:
+    # A replaced file keeps its mode; a new one gets what `open` would give it (0666
+    # less the umask), not the 0600 of a temporary file.
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except OSError:
+        umask = os.umask(0o022)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
 @contextlib.contextmanager
 def atomic_file(path: str | Path, *, binary: bool = False) -> Iterator[Any]:
     """Open `path` for writing (text, or bytes with `binary`) through a temporary file in
-    the same directory, renamed into place on success: a failure never leaves a
-    half-written file, nor clobbers an existing one."""
+    the same directory, flushed to disk and renamed into place on success: a failure
+    (full disk, an interrupt) never leaves a half-written file, nor clobbers an existing
+    one. The file's mode is the old file's, or for a new file the umask's. An `OSError`
+    on the way is raised as `OutputError` naming `path`."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        os.fchmod(fd, _new_file_mode(path))
         with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="") as fh:
             yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OutputError:
+        raise
+    except OSError as e:
+        raise OutputError(f"{path}: cannot write: {e.strerror or e}") from e
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def save_figure(fig: Any, path: str | Path, *, dpi: int = 120) -> None:
+    """Save a matplotlib figure to `path` atomically (`atomic_file`), in the format of
+    its suffix (PNG without one)."""
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    with atomic_file(path, binary=True) as fh:
+        fig.savefig(fh, format=fmt, dpi=dpi)
 
 
 def input_cells(data: Dataset) -> tuple[list[str], list[list[str]]]:

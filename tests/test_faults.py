@@ -9,13 +9,103 @@ data get a warning or an error that names the cause instead of a confident answe
 
 from __future__ import annotations
 
+import contextlib
+import os
+import resource
+import signal
+import stat
 import tracemalloc
 import warnings
 
 import numpy as np
+import pytest
 
 import jaxcal
-from jaxcal.internal import null_space
+from jaxcal.internal import atomic_file, null_space, save_figure
+
+EXAMPLE = "example_calibration.csv"
+
+
+@contextlib.contextmanager
+def disk_full(limit: int = 1024):
+    """While inside, no file of this process grows beyond `limit` bytes: a write past it
+    fails as on a full disk (EFBIG instead of ENOSPC; root is not exempt, unlike a
+    read-only directory)."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+
+
+def only_files(folder, *names):
+    """The folder holds exactly `names`: no temporary or partial file left beside them."""
+    assert sorted(p.name for p in folder.iterdir()) == sorted(names)
+
+
+@pytest.fixture(scope="module")
+def linear_fit(data_dir):
+    robot = jaxcal.load_robot()
+    data = jaxcal.read_dataset(data_dir / EXAMPLE, robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return robot, jaxcal.identify(robot, data, "linear")
+
+
+# ------------------------------------------------------------------ atomic outputs
+
+
+def test_save_robot_keeps_the_previous_file_on_a_full_disk(linear_fit, tmp_path):
+    robot, res = linear_fit
+    out = tmp_path / "cal.json"
+    jaxcal.save_robot(out, robot, res)
+    before = out.read_bytes()
+    assert len(before) > 1024
+    with disk_full(1024), pytest.raises(OSError, match=r"cal\.json: cannot write: File too"):
+        jaxcal.save_robot(out, jaxcal.load_robot(), res, "other.csv")
+    assert out.read_bytes() == before
+    only_files(tmp_path, "cal.json")
+
+
+def test_figures_are_replaced_in_one_step_in_their_suffix_format(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.plot(np.arange(200.0), np.sin(np.arange(200.0)))
+    out = tmp_path / "plot.png"
+    out.write_bytes(b"previous")
+    with disk_full(1024), pytest.raises(OSError, match=r"plot\.png: cannot write"):
+        save_figure(fig, out)
+    assert out.read_bytes() == b"previous"
+    only_files(tmp_path, "plot.png")
+    save_figure(fig, out)
+    save_figure(fig, tmp_path / "plot.svg")
+    plt.close(fig)
+    assert out.read_bytes().startswith(b"\x89PNG")
+    assert b"<svg" in (tmp_path / "plot.svg").read_bytes()[:1000]
+
+
+def test_written_files_follow_the_umask_and_keep_their_mode(tmp_path):
+    mask = os.umask(0o027)
+    try:
+        with atomic_file(tmp_path / "a.csv") as fh:
+            fh.write("x\n")
+    finally:
+        os.umask(mask)
+    mode = lambda p: stat.S_IMODE(p.stat().st_mode)
+    assert mode(tmp_path / "a.csv") == 0o640
+    (tmp_path / "a.csv").chmod(0o604)
+    with atomic_file(tmp_path / "a.csv") as fh:
+        fh.write("y\n")
+    assert mode(tmp_path / "a.csv") == 0o604
+    assert (tmp_path / "a.csv").read_text() == "y\n"
+
 
 # ------------------------------------------------------------------ memory in the rows
 

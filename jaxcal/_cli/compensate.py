@@ -70,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         fig, ax = plt.subplots(figsize=(8, 4))
         plot_compensation(comp, ax)
         fig.tight_layout()
-        fig.savefig(args.plot, dpi=120)
+        from .._io import save_figure
+
+        save_figure(fig, args.plot)
         plt.close(fig)
     s = comp.summary()
     refused = s["refused"]

@@ -63,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
         import matplotlib
 
         matplotlib.use("Agg")
-        rep.plot().savefig(args.plot, dpi=120)
+        from .._io import save_figure
+
+        save_figure(rep.plot(), args.plot)
         print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
     if args.json:
         print_json(rep.to_json())

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._io import atomic_file
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot, load_robot_dict, robot_from_dict, robot_to_dict
 from .result import IdentificationResult
@@ -123,7 +124,8 @@ def save_robot(
     data_file: str | Path | None = None,
 ) -> Robot:
     """Write `robot` with the identified parameters of `result` as a robot file at
-    `path`, with its `"calibration"` block; returns the calibrated robot."""
+    `path`, with its `"calibration"` block; returns the calibrated robot. Written
+    atomically (`atomic_file`): a failure leaves any previous file at `path` intact."""
     new = calibrated_robot(robot, result)
     d = robot_to_dict(new)
     src = "" if data_file is None else f" from {Path(data_file).name}"
@@ -135,7 +137,8 @@ def save_robot(
     d["calibration"] = calibration_block(result, data_file)
     # Round trip through the validating reader before anything is written.
     robot_from_dict(json.loads(json.dumps(d)), source=str(path))
-    Path(path).write_text(json.dumps(d, indent=2) + "\n")
+    with atomic_file(path) as fh:
+        fh.write(json.dumps(d, indent=2) + "\n")
     return new
 
 

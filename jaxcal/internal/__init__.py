@@ -24,6 +24,11 @@ from .._identification.parameter_groups import (
     set_vector as set_vector,
 )
 from .._identification.result import make_result as make_result
+from .._io import (
+    OutputError as OutputError,
+    atomic_file as atomic_file,
+    save_figure as save_figure,
+)
 from .._linalg import dense as dense
 from .._linalg.covariance import (
     covariance_from_jacobian as covariance_from_jacobian,
