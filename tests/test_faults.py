@@ -10,6 +10,7 @@ data get a warning or an error that names the cause instead of a confident answe
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import resource
 import signal
@@ -22,6 +23,7 @@ import pytest
 
 import jaxcal
 from jaxcal.internal import atomic_file, null_space, save_figure
+from jaxcal.internal.cli import main
 
 EXAMPLE = "example_calibration.csv"
 
@@ -149,3 +151,71 @@ def test_identify_20000_rows_in_bounded_memory(robot, data_dir):
     assert res.dof == 3 * n - 5
     # Host memory of the checks and the report: a few (3n, p) arrays, never (n, n).
     assert peak < 200 * 2**20, f"host peak {peak / 2**20:.0f} MiB"
+
+
+# ------------------------------------------------------------------ outputs over inputs
+
+
+def run(args, capsys):
+    rc = main([str(a) for a in args])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    return rc, out.out, out.err
+
+
+@pytest.fixture
+def example_copy(data_dir, tmp_path):
+    path = tmp_path / "meas.csv"
+    path.write_bytes((data_dir / EXAMPLE).read_bytes())
+    return path
+
+
+@pytest.mark.parametrize(
+    "make_args,says",
+    [
+        (lambda p, r: ["simulate", p, "-o", p], "is the data file"),
+        (lambda p, r: ["simulate", p, "-o", p.parent / "." / p.name], "is the data file"),
+        (lambda p, r: ["simulate", p, "--robot", r, "-o", r], "is the robot file"),
+        (lambda p, r: ["identify", p, "--robot", r, "--save-robot", r], "is the robot file"),
+        (lambda p, r: ["identify", p, "--save-robot", p], "is the data file"),
+        (lambda p, r: ["compensate", p, "-o", p], "is the path file"),
+        (lambda p, r: ["compensate", p, "-o", p.parent / "c.csv", "--plot", p], "is the path"),
+        (lambda p, r: ["discover", p, "--plot", p], "is the data file"),
+    ],
+    ids=[
+        "simulate",
+        "simulate-spelling",
+        "simulate-robot",
+        "save-robot",
+        "save-over-data",
+        "compensate",
+        "compensate-plot",
+        "discover-plot",
+    ],
+)
+def test_writing_over_an_input_is_refused(make_args, says, example_copy, tmp_path, capsys):
+    robot_file = tmp_path / "robot.json"
+    robot_file.write_text(json.dumps(jaxcal.robot_to_dict(jaxcal.load_robot())))
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    rc, out, err = run(make_args(example_copy, robot_file), capsys)
+    assert rc == 2 and says in err and "writing there would destroy it" in err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    args = [str(a) for a in make_args(example_copy, robot_file)]
+    has_flag = args[0] != "discover" and "--plot" not in args
+    assert ("--overwrite-input" in err) == has_flag
+
+
+def test_overwrite_input_replaces_the_input_when_asked(example_copy, capsys):
+    before = example_copy.read_text()
+    rc, _, err = run(["simulate", example_copy, "-o", example_copy, "--overwrite-input"], capsys)
+    assert rc == 0 and "wrote 48 rows" in err
+    after = example_copy.read_text()
+    assert after != before and after.splitlines()[0] == before.splitlines()[0]
+
+
+def test_commands_never_reuse_the_measured_columns_names():
+    from jaxcal.compensation import COMMAND_COLUMNS
+
+    measured = {"dx_mm", "dy_mm", "dz_mm", "sigma_mm"}
+    assert not measured & set(COMMAND_COLUMNS)
+    assert {"model_dx_mm", "model_dy_mm", "model_dz_mm"} <= set(COMMAND_COLUMNS)

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from .._format import format_table
-from .main import add_robot_argument, check_output_path, print_json
+from .main import add_overwrite_argument, add_robot_argument, check_output_path, print_json
 
 
 def register(sub) -> None:
@@ -19,8 +19,9 @@ def register(sub) -> None:
             "at the tool point (base frame). The target of a row is the tool pose at the "
             "programmed angles under gravity alone; the compensated angles qc put the tool "
             "on it under gravity and the wrench (full static equilibrium). COMMANDS.csv "
-            "holds the input columns, qc1_deg..qc6_deg, the uncompensated deflection "
-            "dx_mm, dy_mm, dz_mm, the model's residual after compensation (res_mm, "
+            "holds the input columns, qc1_deg..qc6_deg, the model's uncompensated "
+            "deflection model_dx_mm, model_dy_mm, model_dz_mm (measured dx_mm.. columns of "
+            "PATH.csv are ignored, not copied), the model's residual after compensation (res_mm, "
             "res_rot_urad), the condition number, and with a calibrated robot file "
             "(identify --save-robot) res_std_mm, the residual's predicted standard "
             "deviation from the calibration's covariance. Rows that cannot be compensated "
@@ -33,6 +34,7 @@ def register(sub) -> None:
     p.add_argument(
         "-o", "--output", required=True, metavar="COMMANDS.csv", help="compensated commands"
     )
+    add_overwrite_argument(p, "-o")
     p.add_argument(
         "--max-cond",
         type=float,
@@ -50,8 +52,9 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.calibration import load_calibrated
     from ..compensation import compensate, read_path, write_commands
 
-    check_output_path(args.output, "-o")
-    check_output_path(args.plot, "--plot")
+    inputs = {"the path file": args.path, "the robot file": args.robot}
+    check_output_path(args.output, "-o", inputs=inputs, overwrite=args.overwrite_input)
+    check_output_path(args.plot, "--plot", inputs={**inputs, "the -o output": args.output})
     if not args.max_cond > 1:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
     robot, calibration = load_calibrated(args.robot)

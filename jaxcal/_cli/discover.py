@@ -47,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     from .._robot import load_robot
     from ..discrepancy._discover import discover
 
-    check_output_path(args.plot, "--plot")
+    check_output_path(
+        args.plot, "--plot", inputs={"the data file": args.data, "the robot file": args.robot}
+    )
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     show = not args.no_progress and sys.stderr.isatty()

@@ -9,6 +9,7 @@ import warnings
 from .._identification.identify import METHODS
 from .main import (
     add_fix_argument,
+    add_overwrite_argument,
     add_robot_argument,
     check_output_path,
     fix_names,
@@ -59,8 +60,10 @@ def register(sub) -> None:
         "--save-robot",
         metavar="CALIBRATED.json",
         help="write the robot file with the identified parameters and a 'calibration' block "
-        "(method, date, data file and hash, std, covariance, chi2); load it with --robot",
+        "(method, date, data file and hash, std, covariance, chi2); load it with --robot. "
+        "Refused if it is the data or the --robot file, unless --overwrite-input",
     )
+    add_overwrite_argument(p, "--save-robot")
     p.add_argument(
         "--params",
         default=None,
@@ -79,13 +82,18 @@ def run(args: argparse.Namespace) -> int:
     from .._model.robot_files import is_tree_file
     from .._robot import load_robot
 
+    check_output_path(
+        args.save_robot,
+        "--save-robot",
+        inputs={"the data file": args.data, "the robot file": args.robot},
+        overwrite=args.overwrite_input,
+    )
     if is_tree_file(args.robot):
         from .validate import identify_tree
 
         return identify_tree(args)
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
-    check_output_path(args.save_robot, "--save-robot")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)

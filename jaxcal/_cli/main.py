@@ -17,7 +17,13 @@ from pathlib import Path
 
 from .._format import jsonable
 
-__all__ = ["main", "add_robot_argument", "check_output_path", "print_json"]
+__all__ = [
+    "main",
+    "add_robot_argument",
+    "add_overwrite_argument",
+    "check_output_path",
+    "print_json",
+]
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
 COMMANDS = (
@@ -71,10 +77,18 @@ def fix_names(values: Sequence[str]) -> list[str]:
     return [s.strip() for v in values for s in v.split(",") if s.strip()]
 
 
-def check_output_path(path: str | None, option: str) -> None:
+def check_output_path(
+    path: str | None,
+    option: str,
+    *,
+    inputs: dict[str, str | None] | None = None,
+    overwrite: bool | None = None,
+) -> None:
     """Refuse, before any work starts, an output path that cannot be written: a
     directory, or a file in a directory that does not exist (`ValueError` naming the
-    option)."""
+    option). `inputs` (what → path) are the command's input files: writing over one of
+    them is refused, unless `overwrite` is true (the command's `--overwrite-input`; `None`:
+    the command has no such option)."""
     if path is None or path == "-":
         return
     p = Path(path)
@@ -85,6 +99,31 @@ def check_output_path(path: str | None, option: str) -> None:
         raise ValueError(f"{option} {path}: directory {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise ValueError(f"{option} {path}: directory {parent} is not writable")
+    for what, other in (inputs or {}).items():
+        if overwrite or other is None or not _same_file(p, Path(other)):
+            continue
+        hint = "" if overwrite is None else ", or add --overwrite-input to replace it"
+        raise ValueError(
+            f"{option} {path}: is {what} {other}; writing there would destroy it. Give "
+            f"another file name{hint}"
+        )
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    # The same file by any spelling (relative, symbolic or hard links).
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def add_overwrite_argument(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument(
+        "--overwrite-input",
+        action="store_true",
+        help=f"allow {what} to be an input file of this command (refused by default: the "
+        "input would be lost)",
+    )
 
 
 def print_json(obj) -> None:

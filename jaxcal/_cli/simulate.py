@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .main import add_robot_argument, check_output_path, seed
+from .main import add_overwrite_argument, add_robot_argument, check_output_path, seed
 
 
 def register(sub) -> None:
@@ -16,7 +16,9 @@ def register(sub) -> None:
             "Read the configurations and loads of a data-format CSV (its deflection columns "
             "may be absent and are ignored) and write the same rows with deflections of the "
             "full static-equilibrium model (loaded minus unloaded at the same q), noise-free "
-            "unless --noise-mm is given."
+            "unless --noise-mm is given. The output is refused if it is the input file "
+            "(its measured deflections would be replaced by simulated ones) unless "
+            "--overwrite-input is given."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="input CSV (configurations and loads)")
@@ -38,6 +40,7 @@ def register(sub) -> None:
         default=None,
         help="output file (default: standard output)",
     )
+    add_overwrite_argument(p, "-o")
     p.set_defaults(func=run)
 
 
@@ -47,11 +50,16 @@ def run(args: argparse.Namespace) -> int:
     from .._model.simulate import simulate
     from .._robot import load_robot
 
+    check_output_path(
+        args.output,
+        "-o",
+        inputs={"the data file": args.data, "the robot file": args.robot},
+        overwrite=args.overwrite_input,
+    )
     if is_tree_file(args.robot):
         from .validate import simulate_tree
 
         return simulate_tree(args)
-    check_output_path(args.output, "-o")
     if args.noise_mm is not None and args.noise_mm < 0:
         raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")
     robot = load_robot(args.robot)

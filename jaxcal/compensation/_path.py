@@ -34,12 +34,14 @@ def chunk_rows() -> int:
     return chunk_width(cpu=64, accelerator=1024)
 
 
-#: Columns a commands file adds to the path's own.
+#: Columns a commands file adds to the path's own. The model's uncompensated deflection
+#: is `model_d*_mm`, never the data format's `dx_mm..`: a commands file read as data
+#: must not pass model values off as measured ones.
 COMMAND_COLUMNS = (
     *(f"qc{i}_deg" for i in range(1, 7)),
-    "dx_mm",
-    "dy_mm",
-    "dz_mm",
+    "model_dx_mm",
+    "model_dy_mm",
+    "model_dz_mm",
     "res_mm",
     "res_rot_urad",
     "cond",
