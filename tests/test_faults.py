@@ -219,3 +219,88 @@ def test_commands_never_reuse_the_measured_columns_names():
     measured = {"dx_mm", "dy_mm", "dz_mm", "sigma_mm"}
     assert not measured & set(COMMAND_COLUMNS)
     assert {"model_dx_mm", "model_dy_mm", "model_dz_mm"} <= set(COMMAND_COLUMNS)
+
+
+# ------------------------------------------------------------------ writes that fail after the work
+# Each command runs once as usual (which also compiles: nothing is compiled on a full
+# disk, whose cache entries would be cut short), then again with the disk full.
+
+
+def last_error(err, command):
+    """The one error line of a command's standard error, which must be its last."""
+    lines = err.strip().splitlines()
+    assert sum("error:" in ln for ln in lines) == 1, err
+    assert lines[-1].startswith(f"jaxcal {command}: error: "), err
+    return lines[-1]
+
+
+def test_simulate_on_a_full_disk_prints_the_rows(example_copy, tmp_path, capsys):
+    out = tmp_path / "sim.csv"
+    assert run(["simulate", example_copy, "-o", out], capsys)[0] == 0
+    before = out.read_bytes()
+    with disk_full(1024):
+        rc, stdout, err = run(["simulate", example_copy, "-o", out, "--noise-mm", "0.01"], capsys)
+    assert rc == 2
+    line = last_error(err, "simulate")
+    assert f"{out}: cannot write: File too large" in line and "standard output" in line
+    assert stdout.splitlines()[0].startswith("q1_deg,") and len(stdout.splitlines()) == 49
+    assert out.read_bytes() == before
+    only_files(tmp_path, "meas.csv", "sim.csv")
+
+
+def test_save_robot_on_a_full_disk_still_reports(linear_fit, example_copy, tmp_path, capsys):
+    out = tmp_path / "cal.json"
+    args = ["identify", example_copy, "--method", "linear", "--save-robot", out, "--json"]
+    assert run(args, capsys)[0] == 0
+    before = out.read_bytes()
+    with disk_full(1024):
+        rc, stdout, err = run(args, capsys)
+    assert rc == 2
+    assert f"{out}: cannot write" in last_error(err, "identify")
+    report = json.loads(stdout)
+    assert "k2_urad_per_Nm" in report["parameters"] and "saved_robot" not in report
+    assert out.read_bytes() == before
+    only_files(tmp_path, "meas.csv", "cal.json")
+
+
+@pytest.mark.slow
+def test_compensate_on_a_full_disk(example_copy, tmp_path, capsys):
+    lines = example_copy.read_text().splitlines()
+    example_copy.write_text("\n".join(ln.rsplit(",", 3)[0] for ln in lines[:4]) + "\n")
+    out, plot = tmp_path / "c.csv", tmp_path / "c.png"
+    args = ["compensate", example_copy, "-o", out, "--plot", plot]
+    assert run(args, capsys)[0] == 0
+    commands, image = out.read_bytes(), plot.read_bytes()
+    assert len(image) > len(commands) + 4096
+    with disk_full(256):
+        rc, stdout, err = run(args, capsys)
+    assert rc == 2 and f"{out}: cannot write" in last_error(err, "compensate")
+    assert stdout.encode() == commands  # the commands on standard output instead
+    assert "max model residual after" in err  # the summary on standard error
+    assert (out.read_bytes(), plot.read_bytes()) == (commands, image)
+    # The commands fit, the plot does not: the commands are written, the old plot kept.
+    out.write_text("older commands\n")
+    with disk_full(len(commands) + 4096):
+        rc, stdout, err = run(args, capsys)
+    assert rc == 2 and f"{plot}: cannot write" in last_error(err, "compensate")
+    assert "only the plot is missing" in err and "max model residual after" in stdout
+    assert (out.read_bytes(), plot.read_bytes()) == (commands, image)
+    only_files(tmp_path, "meas.csv", "c.csv", "c.png")
+
+
+@pytest.mark.slow
+def test_design_on_a_full_disk_prints_the_design(tmp_path, capsys):
+    out = tmp_path / "design.csv"
+    args = ["design", "--configs", "3", "--model", "linear", "--starts", "1", "--steps", "2"]
+    args += ["--pool", "0", "--bound-pool", "0", "-o", out]
+    assert run(args, capsys)[0] in (0, 1)
+    before = out.read_text()
+    with disk_full(64):
+        rc, stdout, err = run(args, capsys)
+    assert rc == 2
+    line = last_error(err, "design")
+    assert f"{out}: cannot write" in line and "on standard output" in line
+    assert stdout == before  # the same design, on standard output
+    assert "q1_deg" in err and "trace" in err  # the table on standard error
+    assert out.read_text() == before
+    only_files(tmp_path, "design.csv")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 from .._format import format_table
@@ -61,30 +62,55 @@ def run(args: argparse.Namespace) -> int:
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)
     comp = compensate(robot, path, calibration, max_cond=args.max_cond)
-    written = write_commands(args.output, comp)
+    try:
+        written = write_commands(args.output, comp)
+    except OSError as e:
+        # The work is done: the commands go to standard output, the summary to stderr.
+        written = write_commands(sys.stdout, comp)
+        sys.stdout.flush()
+        with contextlib.redirect_stdout(sys.stderr):
+            _report(args, comp, calibration, written, None)
+        print(
+            f"jaxcal compensate: error: {e}; the {written} commands are on standard output "
+            "instead (redirect it with > FILE)",
+            file=sys.stderr,
+        )
+        return 2
     if args.plot:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from .._io import save_figure
         from ..compensation import plot_compensation
 
         fig, ax = plt.subplots(figsize=(8, 4))
         plot_compensation(comp, ax)
         fig.tight_layout()
-        from .._io import save_figure
+        try:
+            save_figure(fig, args.plot)
+        except OSError as e:
+            _report(args, comp, calibration, written, args.output)
+            print(
+                f"jaxcal compensate: error: {e}; the commands are written, only the plot "
+                "is missing",
+                file=sys.stderr,
+            )
+            return 2
+        finally:
+            plt.close(fig)
+    return _report(args, comp, calibration, written, args.output)
 
-        save_figure(fig, args.plot)
-        plt.close(fig)
+
+def _report(args: argparse.Namespace, comp, calibration, written: int, output) -> int:
+    # `output`: the commands file, None when the commands went to standard output.
     s = comp.summary()
     refused = s["refused"]
     for r in refused:
         print(f"jaxcal compensate: row {r['row']} refused: {r['reason']}", file=sys.stderr)
     if args.json:
-        print_json(
-            {**s, "output": args.output, "written": written, "calibrated": bool(calibration)}
-        )
+        print_json({**s, "output": output, "written": written, "calibrated": bool(calibration)})
     else:
         rows = [
             ["rows", s["rows"]],
@@ -99,5 +125,6 @@ def run(args: argparse.Namespace) -> int:
         else:
             rows.append(["predicted residual std", "n/a (robot file has no calibration)"])
         print(format_table(["compensation", ""], rows))
-        print(f"commands written to {args.output}")
+        if output:
+            print(f"commands written to {output}")
     return 1 if refused else 0

@@ -4,6 +4,7 @@ criteria and predicted standard errors of a given design)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 import numpy as np
@@ -309,9 +310,33 @@ def run_design(args: argparse.Namespace) -> int:
         q2_levels=_levels(args.q2_levels),
         bound_pool=args.bound_pool,
     )
+    failed = None
     if args.output:
-        write_dataset(args.output, d.dataset(robot), deflection=False)
-        print(f"wrote {len(d.q) * reps} measurements to {args.output}", file=sys.stderr)
+        try:
+            write_dataset(args.output, d.dataset(robot), deflection=False)
+            print(f"wrote {len(d.q) * reps} measurements to {args.output}", file=sys.stderr)
+        except OSError as e:
+            # The work is done: keep it. The design goes to standard output (the JSON
+            # holds it too), the table to standard error.
+            failed = e
+            if not args.json:
+                write_dataset(sys.stdout, d.dataset(robot), deflection=False)
+                sys.stdout.flush()
+    table_to = sys.stderr if failed and not args.json else sys.stdout
+    with contextlib.redirect_stdout(table_to):
+        code = _report_design(args, d, reps)
+    if failed:
+        where = (
+            "in the JSON on standard output (configs_deg, loads_N)"
+            if args.json
+            else "on standard output as a data-format CSV (redirect it with > FILE)"
+        )
+        print(f"jaxcal design: error: {failed}; the design is {where}", file=sys.stderr)
+        return 2
+    return code
+
+
+def _report_design(args: argparse.Namespace, d, reps: int) -> int:
     c = d.criteria
     eff = d.efficiency
     if args.json:

@@ -61,14 +61,26 @@ def run(args: argparse.Namespace) -> int:
         if show
         else None,
     )
+    code = _report(rep, args)
     if args.plot:
         import matplotlib
 
         matplotlib.use("Agg")
         from .._io import save_figure
 
-        save_figure(rep.plot(), args.plot)
+        try:
+            save_figure(rep.plot(), args.plot)
+        except OSError as e:
+            print(
+                f"jaxcal discover: error: {e}; the report is printed, only the plot is missing",
+                file=sys.stderr,
+            )
+            return 2
         print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
+    return code
+
+
+def _report(rep, args: argparse.Namespace) -> int:
     if args.json:
         print_json(rep.to_json())
         return 0

@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
     failed = not bool(res.converged)
-    saved = None
+    saved = unsaved = None
     if args.save_robot:
         if failed:
             print(
@@ -120,14 +120,17 @@ def run(args: argparse.Namespace) -> int:
             return 1
         from .._identification.calibration import save_robot
 
-        save_robot(args.save_robot, robot, res, args.data)
-        saved = args.save_robot
+        try:
+            save_robot(args.save_robot, robot, res, args.data)
+            saved = args.save_robot
+        except OSError as e:
+            unsaved = e  # the results are still printed below
     if args.json:
         d = res.to_dict(args.outlier_threshold, data.ids)
         if saved:
             d["saved_robot"] = saved
         print_json(d)
-        return 1 if failed else 0
+        return _not_saved(unsaved) if unsaved else (1 if failed else 0)
     print(res.table())
     rows = res.outliers(args.outlier_threshold)
     if rows:
@@ -137,7 +140,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"no outliers (|residual|/sigma > {args.outlier_threshold:g})")
     if saved:
         print(f"calibrated robot written to {saved} (use it with --robot {saved})")
+    if unsaved:
+        return _not_saved(unsaved)
     if failed:
         print("jaxcal identify: error: the fit did not converge", file=sys.stderr)
         return 1
     return 0
+
+
+def _not_saved(error: OSError) -> int:
+    print(
+        f"jaxcal identify: error: {error}; the calibrated robot file was not written "
+        "(any previous file there is unchanged)",
+        file=sys.stderr,
+    )
+    return 2

@@ -185,6 +185,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The reader (e.g. `| head`) went away: not an error of ours.
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115
         return 0
+    except OSError as e:
+        # A file that could not be written or read (full disk, permissions): one line
+        # naming it, as for bad input. Outputs that fail after long work are caught by
+        # their command, which keeps the work (standard output) before ending here.
+        what = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+        print(f"jaxcal {args.command}: error: {what}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
         return 130

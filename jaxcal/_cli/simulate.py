@@ -66,7 +66,19 @@ def run(args: argparse.Namespace) -> int:
     data = read_dataset(args.data, robot, require_deflection=False, ignore_deflection=True)
     noise = None if args.noise_mm is None else args.noise_mm * 1e-3
     out = simulate(robot, data, noise_std=noise, key=args.seed)
-    write_dataset(args.output or sys.stdout, out, sigma=noise is not None)
-    if args.output:
-        print(f"wrote {len(out)} rows to {args.output}", file=sys.stderr)
+    if not args.output:
+        write_dataset(sys.stdout, out, sigma=noise is not None)
+        return 0
+    try:
+        write_dataset(args.output, out, sigma=noise is not None)
+    except OSError as e:
+        # The work is done: the rows go to standard output instead.
+        write_dataset(sys.stdout, out, sigma=noise is not None)
+        print(
+            f"jaxcal simulate: error: {e}; the {len(out)} rows are on standard output "
+            "instead (redirect it with > FILE)",
+            file=sys.stderr,
+        )
+        return 2
+    print(f"wrote {len(out)} rows to {args.output}", file=sys.stderr)
     return 0

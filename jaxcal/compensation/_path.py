@@ -8,8 +8,10 @@ A path is a data-format CSV without deflection columns: per row the programmed a
 
 from __future__ import annotations
 
+import contextlib
 import csv
 from pathlib import Path
+from typing import TextIO
 
 import equinox as eqx
 import jax
@@ -180,11 +182,11 @@ def compensate(
     return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)
 
 
-def write_commands(out: str | Path, comp: Compensation) -> int:
+def write_commands(out: str | Path | TextIO, comp: Compensation) -> int:
     """Write the compensated rows (input columns, `COMMAND_COLUMNS`, `res_std_mm` with a
-    calibration, `id` where the path has labels) to `out`, atomically (a temporary file
-    renamed into place, so a failure never leaves a half-written file). Returns the
-    number of rows written."""
+    calibration, `id` where the path has labels) to a path `out`, atomically (a temporary
+    file renamed into place, so a failure never leaves a half-written file), or to an
+    open text stream. Returns the number of rows written."""
     p = comp.path
     ok = comp.ok
     has_std = bool(np.all(np.isfinite(np.asarray(comp.rows.res_std)[ok]))) and ok.any()
@@ -202,7 +204,8 @@ def write_commands(out: str | Path, comp: Compensation) -> int:
     cond = np.asarray(r.cond)
     std = np.asarray(r.res_std) * 1e3
     n = 0
-    with atomic_file(out) as fh:
+    with contextlib.ExitStack() as stack:
+        fh = stack.enter_context(atomic_file(out)) if isinstance(out, str | Path) else out
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for i in np.flatnonzero(ok):
