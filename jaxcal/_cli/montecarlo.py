@@ -56,17 +56,34 @@ def register(sub) -> None:
         help="trials per compiled step (memory bound; default by method)",
     )
     add_fix_argument(p, "e.g. k1 when the design cannot identify it (vertical loads only)")
+    p.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run the study as N processes of one jax.distributed job on this machine "
+        "(trials sharded over all of them; same numbers as one process)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
+
     from .._identification.result import resolve_name
     from .._io import read_dataset
     from .._robot import load_robot
+    from ..montecarlo._processes import join_processes, run_local_processes
     from ..montecarlo._study import monte_carlo
 
+    if args.processes < 1:
+        raise ValueError(f"--processes must be at least 1, got {args.processes}")
+    if args.processes > 1 and "JAXCAL_COORDINATOR" not in os.environ:
+        return run_local_processes(_worker_argv(args), args.processes)
+    if "JAXCAL_COORDINATOR" in os.environ:
+        join_processes()
     if args.noise_mm is not None and not args.noise_mm > 0:
         raise ValueError(f"--noise-mm must be positive, got {args.noise_mm}")
     if args.trials < 1:
@@ -93,6 +110,10 @@ def run(args: argparse.Namespace) -> int:
         free=free,
         progress=not args.no_progress and not args.json and sys.stderr.isatty(),
     )
+    import jax
+
+    if jax.process_index() != 0:
+        return 0  # one job, one report: process 0's
     if args.json:
         print_json(res.to_dict())
         return 0
@@ -109,3 +130,27 @@ def run(args: argparse.Namespace) -> int:
     )
     print(res.table())
     return 0
+
+
+def _worker_argv(args: argparse.Namespace) -> list[str]:
+    # The same study for each process of the job: every option of this command's
+    # parser, but --processes.
+    argv = ["montecarlo", args.design, "--robot", args.robot, "--trials", str(args.trials)]
+    argv += ["--method", args.method, "--seed", str(args.seed)]
+    for flag, value in (
+        ("--noise-mm", args.noise_mm),
+        ("--student-t", args.student_t),
+        ("--chunk", args.chunk),
+    ):
+        if value is not None:
+            argv += [flag, repr(value)]
+    for name in args.fix:
+        argv += ["--fix", name]
+    for flag, on in (
+        ("--json", args.json),
+        ("--no-progress", args.no_progress),
+        ("--no-cache", getattr(args, "no_cache", False)),
+    ):
+        if on:
+            argv.append(flag)
+    return argv

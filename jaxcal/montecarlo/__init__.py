@@ -6,6 +6,10 @@ from ._plots import (
     plot_error_vs_noise as plot_error_vs_noise,
     plot_histograms as plot_histograms,
 )
+from ._processes import (
+    join_processes as join_processes,
+    run_local_processes as run_local_processes,
+)
 from ._stats import (
     MonteCarloResult as MonteCarloResult,
 )
