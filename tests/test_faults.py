@@ -15,6 +15,9 @@ import os
 import resource
 import signal
 import stat
+import subprocess
+import sys
+import time
 import tracemalloc
 import warnings
 
@@ -304,3 +307,55 @@ def test_design_on_a_full_disk_prints_the_design(tmp_path, capsys):
     assert "q1_deg" in err and "trace" in err  # the table on standard error
     assert out.read_text() == before
     only_files(tmp_path, "design.csv")
+
+
+# ------------------------------------------------------------------ interrupts
+
+# A cold `discover` (no compilation cache) interrupted once it runs. `ctrl_c_in_gc`: the
+# Ctrl-C arrives while a garbage-collector callback runs (jaxlib has one, called often
+# during compiles), where Python drops the KeyboardInterrupt as "Exception ignored".
+INTERRUPTED = """
+import gc, os, signal, sys, time
+from jaxcal.internal.cli import main
+mode, start, sent = sys.argv[1], time.monotonic(), []
+
+def ctrl_c_in_gc(phase, info):
+    if phase == "start" and not sent and time.monotonic() - start > 1.0:
+        sent.append(1)
+        os.kill(os.getpid(), signal.SIGINT)
+
+if mode == "gc":
+    gc.callbacks.append(ctrl_c_in_gc)
+print("running", file=sys.stderr, flush=True)
+sys.exit(main(["discover", sys.argv[2], "--no-progress"]))
+"""
+
+
+@pytest.mark.parametrize("mode", ["signal", "gc"])
+def test_ctrl_c_stops_a_cold_discover(mode, data_dir, tmp_path):
+    env = {**os.environ, "JAXCAL_CACHE_DIR": "off"}
+    cmd = [sys.executable, "-c", INTERRUPTED, mode, str(data_dir / EXAMPLE)]
+    # A test worker may ignore SIGINT, which a child would inherit: Ctrl-C as in a shell.
+    proc = subprocess.Popen(
+        cmd,
+        env=env,
+        cwd=tmp_path,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    assert proc.stderr is not None
+    assert proc.stderr.readline() == "running\n"
+    if mode == "signal":
+        time.sleep(1.5)
+        proc.send_signal(signal.SIGINT)
+    t0 = time.monotonic()
+    try:
+        err = proc.communicate(timeout=30)[1]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        err = proc.communicate()[1]
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["jaxcal discover: interrupted"]
+    assert time.monotonic() - t0 < 10
+    only_files(tmp_path)

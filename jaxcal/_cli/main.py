@@ -7,11 +7,13 @@ table by default and one JSON object with `--json`.
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import importlib
 import json
 import os
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -158,6 +160,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        return _run(args)
+    except KeyboardInterrupt:
+        # Ctrl-C anywhere in a command, set-up and compiles included: one line, 130.
+        print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace) -> int:
     import jax
 
     # Identification and simulation at µm precision need float64; the CLI enables it
@@ -176,6 +187,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"jaxcal {args.command}: warning: {message}", file=sys.stderr)
 
     shown, warnings.showwarning = warnings.showwarning, show
+    unraisable, sys.unraisablehook = sys.unraisablehook, _interrupt_again(sys.unraisablehook)
     try:
         return int(args.func(args) or 0)
     except (DataError, ValueError, DeflectionError) as e:
@@ -192,11 +204,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         what = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
         print(f"jaxcal {args.command}: error: {what}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
-        return 130
     finally:
         warnings.showwarning = shown
+        sys.unraisablehook = unraisable
+
+
+def _interrupt_again(previous):
+    """An unraisable-exception hook that does not let Ctrl-C get lost. Python drops an
+    exception raised where it cannot propagate, such as a garbage-collector callback
+    (jaxlib has one, and it runs often during a compile): a Ctrl-C landing there would
+    be printed as "Exception ignored" and the command would run on. The hook raises it
+    again in the main thread, where it stops the command (exit status 130): from another
+    thread, a moment later, so that it lands after the callback (an interrupt raised
+    in the hook itself would be dropped as well)."""
+
+    def hook(info):
+        if isinstance(info.exc_value, KeyboardInterrupt):
+            threading.Timer(0.05, _thread.interrupt_main).start()
+        else:
+            previous(info)
+
+    return hook
 
 
 def _enable_cache() -> None:
