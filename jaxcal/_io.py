@@ -35,6 +35,7 @@ __all__ = [
     "DataError",
     "configurations",
     "q2_groups",
+    "Q2_LEVEL_TOL_DEG",
     "read_rows",
     "finite_number",
 ]
@@ -142,11 +143,26 @@ def configurations(q: Float[ArrayLike, "n 6"]) -> tuple[np.ndarray, np.ndarray]:
     return unique, index.reshape(-1)
 
 
-def q2_groups(q2: Float[Array, " n"], decimals: int = 6) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct q2 values (rad) of a data set and each row's group index. Values equal
-    to `decimals` decimals of a degree are the same group. Host-side (not traceable)."""
-    key = np.round(np.rad2deg(np.asarray(q2)), decimals)
-    values, index = np.unique(key, return_inverse=True)
+#: q2 readings (deg) within this of their neighbour are one level: a plan's level read
+#: back from the encoders jitters by a few thousandths of a degree, and a design's
+#: levels are degrees apart.
+Q2_LEVEL_TOL_DEG = 0.01
+
+
+def q2_groups(
+    q2: Float[Array, " n"], tol_deg: float = Q2_LEVEL_TOL_DEG
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct q2 levels (rad) of a data set and each row's level index. Sorted
+    readings closer than `tol_deg` degrees to the previous one belong to its level,
+    whose value is their mean. Host-side (not traceable)."""
+    deg = np.rad2deg(np.asarray(q2, dtype=float)).reshape(-1)
+    order = np.argsort(deg, kind="stable")
+    sorted_deg = deg[order]
+    starts = np.concatenate([[True], np.diff(sorted_deg) > tol_deg])
+    level = np.cumsum(starts) - 1
+    index = np.empty(deg.size, dtype=int)
+    index[order] = level
+    values = np.bincount(level, weights=sorted_deg) / np.bincount(level)
     return np.deg2rad(values), index
 
 

@@ -359,3 +359,102 @@ def test_ctrl_c_stops_a_cold_discover(mode, data_dir, tmp_path):
     assert err.strip().splitlines() == ["jaxcal discover: interrupted"]
     assert time.monotonic() - t0 < 10
     only_files(tmp_path)
+
+
+# ------------------------------------------------------------------ implausible data
+
+
+def edit_column(path, column, value_of_row):
+    """Rewrite one column of a CSV: `value_of_row(i, old)` for data row i (0-based)."""
+    lines = path.read_text().splitlines()
+    j = lines[0].split(",").index(column)
+    for i in range(1, len(lines)):
+        cells = lines[i].split(",")
+        cells[j] = str(value_of_row(i - 1, float(cells[j])))
+        lines[i] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("command", ["discover", "identify"])
+def test_zero_loads_are_an_error_naming_them(command, example_copy, capsys):
+    for c in ("fx_N", "fy_N", "fz_N"):
+        edit_column(example_copy, c, lambda i, v: 0.0)
+    rc, out, err = run([command, example_copy], capsys)
+    assert rc == 2 and out == ""
+    assert "every row's load is zero" in last_error(err, command)
+    assert "vertical" not in err and "inf" not in err
+
+
+def report(p_after: float, chi2_red_after: float):
+    """A discover report whose final model has the given fit; row 3 fits worst."""
+    res = np.full((5, 3), 0.01e-3)
+    res[2, 1] = 0.5e-3
+    return jaxcal.DiscoveryReport(
+        effect="none", joint=None, words="no missing effect", params={}, n_rows=5,
+        dof_before=7, dof_after=7, rms_before_mm=0.1, rms_after_mm=0.1,
+        rms_axis_before_mm=(0.1,) * 3, rms_axis_after_mm=(0.1,) * 3,
+        chi2_red_before=chi2_red_after, chi2_red_after=chi2_red_after,
+        p_value_before=p_after, p_value_after=p_after, delta_bic=-3.0, lr_p_value=0.5,
+        heldout_rms_before_mm=0.1, heldout_rms_after_mm=0.1, best="backlash j2",
+        candidates=[], ambiguous_with=[], residuals_before=res, residuals_after=res,
+        sigma_mm=0.02,
+    )  # fmt: skip
+
+
+def test_discover_says_when_its_final_model_still_does_not_fit():
+    bad = report(p_after=1e-30, chi2_red_after=35.7)
+    (line,) = bad.warnings()
+    assert "still does not fit" in line and "p = 1e-30 < 0.001" in line
+    assert "worst rows 3 (25.0 σ)" in line
+    assert bad.to_json()["warnings"] == [line]
+    assert "fits to the noise" not in bad.summary() and "does not fit" in bad.summary()
+    good = report(p_after=0.2, chi2_red_after=1.1)
+    assert good.warnings() == [] and good.to_json()["warnings"] == []
+    assert "fits to the noise" in good.summary()
+
+
+def test_near_equal_q2_readings_are_one_level(example_copy, tmp_path, capsys):
+    # A plan of 3 q2 levels, 48 rows; then the same plan with q2 read back ±0.002 deg.
+    levels = (-20.0, 10.0, 40.0)
+    plan = edit_column(example_copy, "q2_deg", lambda i, v: levels[i % 3])
+    args = ["evaluate", plan, "--model", "linear", "--bound-pool", "0", "--json"]
+    rc, out, err = run(args, capsys)
+    clean = json.loads(out)
+    assert rc == 0 and clean["warnings"] == [] and "warning" not in err
+    edit_column(plan, "q2_deg", lambda i, v: v + 0.002 * ((i // 3) % 3 - 1))
+    rc, out, err = run(args, capsys)
+    jitter = json.loads(out)
+    assert rc == 0 and list(jitter["std"]) == list(clean["std"])  # 3 levels, not 9
+    assert np.allclose(list(jitter["std"].values()), list(clean["std"].values()), rtol=1e-3)
+    (line,) = jitter["warnings"]
+    assert line.startswith("q2 readings within 0.01 deg of each other are one level: ")
+    assert "; 9.998 .. 10.002 deg (16 rows) as 9.99988 deg;" in line and line.count(" as ") == 3
+    assert err.strip().splitlines() == [f"jaxcal evaluate: warning: {line}"]
+
+
+def test_loads_beyond_the_robot_file_maximum_are_named(example_copy, tmp_path, capsys):
+    # Rows 3 and 7 at twice the experiment's 700 kg.
+    edit_column(example_copy, "fz_N", lambda i, v: -13730.0 if i in (2, 6) else v)
+    rc, out, err = run(["simulate", example_copy, "-o", tmp_path / "sim.csv"], capsys)
+    assert rc == 0
+    warned = [ln for ln in err.splitlines() if "warning" in ln]
+    assert len(warned) == 1
+    assert warned[0].startswith("jaxcal simulate: warning: row(s) 3, 7: a load of up to ")
+    assert "beyond the robot file's experiment.max_load_kg (6865 N)" in warned[0]
+    rc, _, err = run(["simulate", example_copy.parent / "sim.csv", "-o", tmp_path / "again.csv"],
+                     capsys)  # fmt: skip
+    assert rc == 0 and "row(s) 3, 7" in err
+
+
+def test_copied_rows_warn_that_the_std_shrinks(example_copy, capsys):
+    rc, out, err = run(["identify", example_copy, "--method", "linear", "--json"], capsys)
+    assert rc == 0 and "copies" not in err
+    lines = example_copy.read_text().splitlines()
+    example_copy.write_text("\n".join(lines + lines[1:]) + "\n")  # the file appended to itself
+    rc, out, err = run(["identify", example_copy, "--method", "linear", "--json"], capsys)
+    assert rc == 0
+    (line,) = [w for w in json.loads(out)["warnings"] if "copies" in w]
+    assert line.startswith("48 of 96 rows are exact copies of an earlier row")
+    assert "rows 49, 50, 51" in line and "√2 = 1.41x too small" in line
+    assert f"jaxcal identify: warning: {line}" in err.splitlines()

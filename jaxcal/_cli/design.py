@@ -143,7 +143,9 @@ def register(sub) -> None:
         description=(
             "Print every design criterion (O1 trace, O2 determinant, O3 weighted, absolute "
             "and relative) and each parameter's predicted standard error for the "
-            "configurations and loads of a data-format CSV (deflections ignored)."
+            "configurations and loads of a data-format CSV (deflections ignored). q2 "
+            "readings within 0.01 deg of each other are one level (a warning lists the "
+            "grouping)."
         ),
     )
     e.add_argument("design", metavar="DESIGN.csv")
@@ -437,6 +439,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from .._io import read_dataset
+    from .._plausibility import merged_q2_levels
     from .._robot import load_robot
     from ..design._bound import design_bound
     from ..design._constraints import CONSTRAINTS, constraint_values
@@ -447,6 +450,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
     moment = data.moment if data.has_moments else None
     model = args.model
     pset, focus = resolve_parameters(robot, args.parameters)
+    # Aggregated parameters are per q2 level: say which readings make one level.
+    merged = merged_q2_levels(data.q[:, 1]) if pset == "aggregated" else None
+    if merged:
+        print(f"jaxcal evaluate: warning: {merged}", file=sys.stderr)
     rel, ab = (
         design_criteria(
             robot,
@@ -509,6 +516,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 "trace_share": _shares(own),
                 "feasible": feasible,
                 "violations": violations,
+                "warnings": [merged] if merged else [],
             }
         )
         return 0

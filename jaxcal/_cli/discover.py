@@ -20,7 +20,9 @@ def register(sub) -> None:
             "tool compliance, and a tracker-rotation decoy), fit the best K with the full "
             "equilibrium model and choose one only if it is decisively better (ΔBIC ≥ 10) "
             "and lowers the leave-one-configuration-out error. Prints the effect, its "
-            "parameters and the gap before and after."
+            "parameters and the gap before and after, and warns when the final model still "
+            "does not fit (χ² p-value below 0.001). Loads that are zero in every row are an "
+            "error."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")
@@ -61,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         if show
         else None,
     )
+    for line in rep.warnings():
+        print(f"jaxcal discover: warning: {line}", file=sys.stderr)
     code = _report(rep, args)
     if args.plot:
         import matplotlib

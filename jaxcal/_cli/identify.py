@@ -28,7 +28,8 @@ def register(sub) -> None:
             "robot's noise). Methods: nonlinear (default; full equilibrium model, "
             "Levenberg-Marquardt), two-step (paper eqs. 20-22) and linear (eq. 3). "
             "Parameters the data cannot determine are named; hold them at the robot's "
-            "values with --fix."
+            "values with --fix. Loads that are zero in every row are an error; rows that "
+            "are exact copies of another row warn (they shrink the standard errors)."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")
@@ -127,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
             unsaved = e  # the results are still printed below
     if args.json:
         d = res.to_dict(args.outlier_threshold, data.ids)
+        d["warnings"] = [str(w.message) for w in caught]
         if saved:
             d["saved_robot"] = saved
         print_json(d)

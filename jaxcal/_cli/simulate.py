@@ -16,7 +16,9 @@ def register(sub) -> None:
             "Read the configurations and loads of a data-format CSV (its deflection columns "
             "may be absent and are ignored) and write the same rows with deflections of the "
             "full static-equilibrium model (loaded minus unloaded at the same q), noise-free "
-            "unless --noise-mm is given. The output is refused if it is the input file "
+            "unless --noise-mm is given. Rows whose load exceeds the robot file's "
+            "experiment.max_load_kg are named in a warning. The output is refused if it is "
+            "the input file "
             "(its measured deflections would be replaced by simulated ones) unless "
             "--overwrite-input is given."
         ),
@@ -48,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
     from .._model.robot_files import is_tree_file
     from .._model.simulate import simulate
+    from .._plausibility import load_beyond_limit
     from .._robot import load_robot
 
     check_output_path(
@@ -64,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot, require_deflection=False, ignore_deflection=True)
+    beyond = load_beyond_limit(robot, data)
+    if beyond:
+        print(f"jaxcal simulate: warning: {beyond}", file=sys.stderr)
     noise = None if args.noise_mm is None else args.noise_mm * 1e-3
     out = simulate(robot, data, noise_std=noise, key=args.seed)
     if not args.output:

@@ -24,6 +24,7 @@ from .._io import Dataset, q2_groups
 from .._linalg.covariance import dead_columns, null_space, nullity
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
+from .._plausibility import check_loaded, duplicate_rows
 from .._robot import Robot
 from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
@@ -46,7 +47,8 @@ _FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
 
 def check_inputs(robot: Robot, data: Dataset) -> None:
     """Raise `ValueError` naming the problem: float64 off, no deflections, non-finite
-    values, non-positive σ, joint angles outside the robot's limits."""
+    values, non-positive σ, no load in any row, joint angles outside the robot's
+    limits."""
     x64 = jax.config.jax_enable_x64  # pyright: ignore[reportAttributeAccessIssue]
     if not x64 or jnp.zeros(()).dtype != jnp.float64:
         raise ValueError(
@@ -65,6 +67,7 @@ def check_inputs(robot: Robot, data: Dataset) -> None:
             raise ValueError(f"data: non-finite (NaN or infinite) {name} in row(s) {rows}")
     if np.any(np.asarray(data.sigma) <= 0):
         raise ValueError("data: sigma must be positive in every row")
+    check_loaded(data)
     q = np.asarray(data.q)
     lim = np.asarray(robot.joint_limits)
     tol = 1e-9
@@ -195,6 +198,9 @@ def identify(
     if robust and method != "nonlinear":
         raise ValueError("robust (Huber) fitting is available for the nonlinear method only")
     check_inputs(robot, data)
+    copies = duplicate_rows(data)
+    if copies:
+        warnings.warn(copies, stacklevel=2)
     names = robot.parameter_names
     fixed = tuple(dict.fromkeys(resolve_name(str(f), names) for f in fix))
     if method == "two-step":

@@ -47,6 +47,7 @@ import numpy as np
 
 from .._io import Dataset
 from .._model.candidates import Candidate, default_candidates
+from .._plausibility import check_loaded
 from .._robot import Robot
 from ._heldout import heldout_residuals
 from ._report import (
@@ -102,6 +103,7 @@ def discover_batch(
         )
     if refine < 1:
         raise ValueError(f"refine must be at least 1, got {refine}")
+    check_loaded(data)
     cands = default_candidates(robot) if candidates is None else tuple(candidates)
     if not cands:
         raise ValueError("no candidates to test")
@@ -325,6 +327,7 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
         nominal_params=nominal if not chosen else named(sm.names, params_b, cov_b, slice(0, p0)),
         nominal_converged=bool(nom.converged[s]),
         sigma_mm=float(np.mean(sigma) * 1e3),
+        sigma_rows_mm=np.asarray(sigma, float) * 1e3,
     )
     return rep
 

@@ -21,10 +21,15 @@ __all__ = [
     "CandidateResult",
     "chi2_sf",
     "DECISIVE_BIC",
+    "FIT_ALPHA",
 ]
 
 #: ΔBIC a candidate needs to be chosen (Kass & Raftery: > 10 is "very strong").
 DECISIVE_BIC = 10.0
+
+#: A model whose χ² has a p-value below this does not fit the data (the 0.1 % false
+#: alarms of identify's χ² band and gross-error test).
+FIT_ALPHA = 1e-3
 
 
 def chi2_sf(x: float, dof: float) -> float:
@@ -103,6 +108,32 @@ class DiscoveryReport:
     nominal_converged: bool = True
     #: The data's mean tracker σ (mm): the band of `plot` and the unit of `separating`.
     sigma_mm: float = 0.02
+    #: Each row's σ (mm), for the worst rows of `warnings` (default: `sigma_mm`).
+    sigma_rows_mm: np.ndarray | None = None
+
+    def worst_rows(self, k: int = 3) -> list[tuple[int, float]]:
+        """`(row, largest |residual|/σ)` of the `k` rows worst fitted after (1-based)."""
+        if self.residuals_after is None:
+            return []
+        sig = self.sigma_mm if self.sigma_rows_mm is None else np.asarray(self.sigma_rows_mm)
+        z = np.abs(np.asarray(self.residuals_after)) * 1e3 / np.reshape(sig, (-1, 1))
+        z = z.max(axis=1)
+        return [(int(i) + 1, float(z[i])) for i in np.argsort(-z)[:k]]
+
+    def warnings(self) -> list[str]:
+        """One line for each thing the numbers contradict: a final model (the nominal
+        one, or with the named effect) whose χ² says it still does not fit."""
+        if not self.p_value_after < FIT_ALPHA:
+            return []
+        model = "the nominal model" if self.effect == "none" else f"the model with {self.best}"
+        rows = ", ".join(f"{r} ({z:.1f} σ)" for r, z in self.worst_rows())
+        return [
+            f"{model} still does not fit the data: χ²_red = {self.chi2_red_after:.4g} for "
+            f"{self.dof_after} dof (p = {self.p_value_after:.2g} < {FIT_ALPHA:g}), residuals "
+            f"{np.sqrt(max(self.chi2_red_after, 0.0)):.3g}x the stated σ; worst rows {rows}. "
+            "Is sigma_mm right, are there gross errors (jaxcal identify names them), or is "
+            "more than one effect missing?"
+        ]
 
     def to_json(self) -> dict:
         """The JSON object of `jaxcal discover --json`."""
@@ -125,17 +156,25 @@ class DiscoveryReport:
                 }
                 for c in self.candidates
             ],
+            "warnings": self.warnings(),
         }
 
     def summary(self) -> str:
         """A few lines in words."""
         lines = []
-        if self.effect == "none":
+        if self.effect == "none" and not self.p_value_before < FIT_ALPHA:
             lines.append(
                 f"No missing effect: the nominal model fits to the noise "
                 f"(χ²_red = {self.chi2_red_before:.3f}, p = {self.p_value_before:.3g}); best "
                 f"candidate {self.best} has ΔBIC = {self.delta_bic:.1f} (< {DECISIVE_BIC:g} "
                 "or no held-out gain)."
+            )
+        elif self.effect == "none":
+            lines.append(
+                f"No candidate explains the gap: the nominal model does not fit "
+                f"(χ²_red = {self.chi2_red_before:.4g}, p = {self.p_value_before:.3g}), and "
+                f"the best candidate {self.best} has ΔBIC = {self.delta_bic:.1f} (< "
+                f"{DECISIVE_BIC:g} or no held-out gain)."
             )
         else:
             lines.append(f"Missing effect: {self.words}.")
