@@ -167,7 +167,7 @@ def calibrate_tree(
     *,
     fit_groups: tuple[str, ...] | None = None,
     hold: tuple[str, ...] = (),
-    max_steps: int = 100,
+    max_steps: int = 300,
     rcond: float = PIVOT_RCOND,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:

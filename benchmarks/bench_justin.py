@@ -1,0 +1,87 @@
+"""Agile Justin on its published data: the validation table on several held-out
+splits, and the time of `jaxcal identify` on 300 rows from the command line, cold (a
+new process, no compilation cache) and warm (a new process, the cache filled).
+
+Run: `python benchmarks/bench_justin.py [--seeds 0 1 2] [--no-validate] [--no-identify]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+
+import jaxcal  # noqa: E402
+from jaxcal.internal import split_rows  # noqa: E402
+
+DATA = Path(__file__).parent.parent / "tests" / "data" / "dlr_agile_justin.csv"
+PUBLISHED = {
+    "frames": (21.33, 9.71, 63.41),
+    "joint-offsets": (18.18, 7.80, 45.9),
+    "dh": (10.5, 5.74, 36.37),
+    "joint-compliance": (5.64, 2.57, 12.83),
+    "lateral-compliance": (3.12, 1.71, 8.23),
+}
+
+
+def _rows(data, idx):
+    n = len(data)
+    return jax.tree_util.tree_map(
+        lambda x: x[idx] if hasattr(x, "shape") and x.shape[:1] == (n,) else x, data
+    )
+
+
+def validate(seeds: list[int]) -> None:
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    data = jaxcal.read_markers(DATA, robot)
+    for seed in seeds:
+        train, test = split_rows(len(data), 200, seed)
+        t0 = time.perf_counter()
+        stages = jaxcal.validate_tree(robot, _rows(data, train), _rows(data, test))
+        print(f"seed {seed}: {time.perf_counter() - t0:.0f} s")
+        for s in stages:
+            pub = "/".join(f"{v:g}" for v in PUBLISHED[s.groups[-1]])
+            print(
+                f"  {s.groups[-1]:20s} {s.mean_mm:6.2f} {s.std_mm:5.2f} {s.max_mm:6.2f}  "
+                f"fitted {s.fitted:3d} converged {s.converged}  published {pub}"
+            )
+
+
+def identify_times() -> None:
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    data = jaxcal.read_markers(DATA, robot)
+    train, _ = split_rows(len(data), 200, 0)
+    part = _rows(data, train)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "justin300.csv")
+        jaxcal.write_markers(path, part, robot, part.markers)
+        env = dict(os.environ, JAXCAL_CACHE_DIR=os.path.join(tmp, "cache"))
+        cmd = [sys.executable, "-m", "jaxcal", "identify", path, "--robot", "dlr_agile_justin"]
+        for label, extra in (("cold, no cache", ["--no-cache"]), ("fills cache", []), ("warm", [])):
+            t0 = time.perf_counter()
+            run = subprocess.run([*cmd, *extra], env=env, capture_output=True, text=True)
+            dt = time.perf_counter() - t0
+            assert run.returncode == 0, run.stderr[-2000:]
+            print(f"identify 300 rows, {label}: {dt:.1f} s")
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2])
+    ap.add_argument("--no-validate", action="store_true")
+    ap.add_argument("--no-identify", action="store_true")
+    a = ap.parse_args()
+    if not a.no_identify:
+        identify_times()
+    if not a.no_validate:
+        validate(a.seeds)
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
