@@ -40,10 +40,10 @@ class MarkerData(eqx.Module):
     - `ids`: row labels.
     """
 
-    q: Float[Array, "n N"]
-    markers: Float[Array, "n k 3"] | None
-    seen: Bool[Array, "n k"]
-    sigma: Float[Array, " n"]
+    q: Float[Array | np.ndarray, "n N"]
+    markers: Float[Array | np.ndarray, "n k 3"] | None
+    seen: Bool[Array | np.ndarray, "n k"]
+    sigma: Float[Array | np.ndarray, " n"]
     ids: tuple[str, ...] = eqx.field(static=True, default=())
     source: str = eqx.field(static=True, default="")
 

@@ -20,7 +20,7 @@ Groups, in the order a calibration adds them:
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -170,9 +170,9 @@ def _where(table: tuple[Parameter, ...]) -> dict[str, tuple[np.ndarray, tuple[np
     }
 
 
-def _field(robot: TreeRobot, path: str):
+def _field(robot: TreeRobot, path: str) -> Any:
     # A field of the robot or of one of its parts (`laws.0.Kc`).
-    obj = robot
+    obj: Any = robot
     for part in path.split("."):
         obj = obj[int(part)] if part.isdigit() else getattr(obj, part)
     return obj

@@ -139,7 +139,7 @@ def _live_singular(J: np.ndarray, vectors: bool):
     if Js.shape[0] > Js.shape[1]:
         # A tall matrix has the singular values and right vectors of its triangle R:
         # memory and time linear in the rows (the full SVD's left factor is rows²).
-        Js = np.linalg.qr(Js, mode="r")
+        Js = np.asarray(np.linalg.qr(Js, mode="r"))
     if vectors:
         _, s, vt = np.linalg.svd(Js, full_matrices=True)
     else:
