@@ -17,6 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._keys import check_keys
+
 __all__ = [
     "AbstractEffect",
     "Robot",
@@ -187,18 +189,9 @@ _KNOWN_KEYS: dict[str, tuple[str, ...]] = {
 def _check_keys(d: dict) -> None:
     """Refuse unknown keys (a misspelt key would otherwise be silently ignored, and the
     robot built without what the user meant), naming the nearest known one."""
-    import difflib
 
     def check(obj, where: str, known: tuple[str, ...]):
-        if not isinstance(obj, dict):
-            return
-        for k in obj:
-            if k not in known:
-                near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
-                hint = f"; did you mean {near[0]!r}?" if near else ""
-                raise ValueError(
-                    f"robot file: unknown key {where}{k!r}{hint} (known: {', '.join(known)})"
-                )
+        check_keys(obj, where, known, required=False)
 
     check(d, "", _KNOWN_KEYS[""])
     for section in ("geometry_m", "compensator", "experiment"):

@@ -38,7 +38,6 @@ its key names. Array fields are what one identifies; topology is plain Python.
 
 from __future__ import annotations
 
-import difflib
 import math
 from typing import Any
 
@@ -47,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._keys import check_keys
 from .spring_laws import SpringLaw, spring_law_from_dict, spring_law_to_dict
 
 __all__ = ["TreeRobot", "tree_from_dict", "tree_to_dict"]
@@ -244,16 +244,6 @@ _KNOWN: dict[str, tuple[str, ...]] = {
 }
 
 
-def _check_keys(obj: Any, where: str, known: tuple[str, ...]) -> None:
-    if not isinstance(obj, dict):
-        raise ValueError(f"robot file: {where or 'the top level'} must be an object")
-    for k in obj:
-        if k not in known:
-            near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            raise ValueError(f"robot file: unknown key {where}{k!r}{hint}")
-
-
 def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
     """Roll, pitch, yaw (rad) of a rotation matrix, `R = Rz(yaw) Ry(pitch) Rx(roll)`.
     A matrix printed with rounded entries is first made orthonormal (its nearest rotation
@@ -285,13 +275,13 @@ def _pose(d: dict, where: str, xyz: str, rpy: str, matrix: str) -> np.ndarray:
 def tree_from_dict(d: dict) -> TreeRobot:
     """Build a `TreeRobot` from a parsed robot file (see `jaxcal/robots/*.json`); every
     problem raises `ValueError` naming the key."""
-    _check_keys(d, "", _KNOWN[""])
+    check_keys(d, "", _KNOWN[""])
     joints = d.get("joints")
     if not isinstance(joints, list) or not joints:
         raise ValueError("robot file: 'joints' must be a non-empty list of active joints")
     joint_names, limits = [], []
     for i, j in enumerate(joints):
-        _check_keys(j, f"joints[{i}].", _KNOWN["joints"])
+        check_keys(j, f"joints[{i}].", _KNOWN["joints"])
         joint_names.append(str(j.get("name", f"q{i + 1}")))
         lim = np.radians(np.asarray(j.get("limits_deg", [-180.0, 180.0]), np.float64))
         if lim.shape != (2,) or not lim[0] < lim[1]:
@@ -304,7 +294,7 @@ def tree_from_dict(d: dict) -> TreeRobot:
     commanded: list[tuple[tuple[int, float], ...]] = []
     for i, el in enumerate(d.get("elements", [])):
         where = f"elements[{i}]"
-        _check_keys(el, f"{where}.", _KNOWN["elements"])
+        check_keys(el, f"{where}.", _KNOWN["elements"])
         name = str(el.get("name", f"e{i}"))
         if name in names:
             raise ValueError(f"robot file: {where}: element name {name!r} used twice")
@@ -315,7 +305,7 @@ def tree_from_dict(d: dict) -> TreeRobot:
         parents.append(-1 if parent is None else names.index(parent))
         origins.append(_pose(el, where, "origin_xyz_m", "origin_rpy_deg", "origin_matrix"))
         row = el.get("dh", {})
-        _check_keys(row, f"{where}.dh.", _KNOWN["dh"])
+        check_keys(row, f"{where}.dh.", _KNOWN["dh"])
         dhs.append(
             [
                 float(row.get("d_m", 0.0)),
@@ -390,18 +380,18 @@ def tree_from_dict(d: dict) -> TreeRobot:
 
     mass_el, mass_kg, mass_at = [], [], []
     for i, m in enumerate(d.get("masses", [])):
-        _check_keys(m, f"masses[{i}].", _KNOWN["masses"])
+        check_keys(m, f"masses[{i}].", _KNOWN["masses"])
         mass_el.append(element(m.get("element"), f"masses[{i}]"))
         mass_kg.append(float(m["kg"]))
         mass_at.append(np.asarray(m.get("at_m", [0.0, 0.0, 0.0]), np.float64))
     mk_el, mk_names, mk_at = [], [], []
     for i, m in enumerate(d.get("markers", [])):
-        _check_keys(m, f"markers[{i}].", _KNOWN["markers"])
+        check_keys(m, f"markers[{i}].", _KNOWN["markers"])
         mk_names.append(str(m["name"]))
         mk_el.append(element(m.get("element"), f"markers[{i}]"))
         mk_at.append(np.asarray(m.get("at_m", [0.0, 0.0, 0.0]), np.float64))
     world = d.get("world", {})
-    _check_keys(world, "world.", _KNOWN["world"])
+    check_keys(world, "world.", _KNOWN["world"])
     g = np.asarray(d.get("gravity_m_per_s2", [0.0, 0.0, -G]), np.float64)
 
     f = jnp.asarray

@@ -56,7 +56,6 @@ root link's z, 1 mm measurement noise.
 
 from __future__ import annotations
 
-import difflib
 import io
 import math
 from pathlib import Path
@@ -65,6 +64,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float
 
+from .._keys import check_keys
 from .tree import G, TreeRobot, tree_from_dict
 
 __all__ = ["tree_dict_from_urdf", "load_urdf"]
@@ -86,16 +86,6 @@ _SIDECAR: dict[str, tuple[str, ...]] = {
     "joints": ("compliance_urad_per_Nm", "springs", "limits_deg", "locked_deg", "locked_m"),
     "markers": ("name", "link", "at_m"),
 }
-
-
-def _check_keys(obj: Any, where: str, known: tuple[str, ...]) -> None:
-    if not isinstance(obj, dict):
-        raise ValueError(f"URDF sidecar: {where or 'the top level'} must be an object")
-    for k in obj:
-        if k not in known:
-            near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            raise ValueError(f"URDF sidecar: unknown key {where}{k!r}{hint}")
 
 
 def axis_angles(axis: Float[np.ndarray, 3]) -> tuple[float, float]:
@@ -198,7 +188,7 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
     data, where = _read(path_or_text)
     model, origins = _parse(data, where)
     side = {} if sidecar is None else sidecar
-    _check_keys(side, "", _SIDECAR[""])
+    check_keys(side, "", _SIDECAR[""], what="URDF sidecar")
     urdf_joints = list(model.robot.joints)
     links = {lk.name: lk for lk in model.robot.links}
     joint_of = {j.name: j for j in urdf_joints}
@@ -241,9 +231,9 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
 
     # -- sidecar joint entries --------------------------------------------------------
     side_joints = side.get("joints", {})
-    _check_keys(side_joints, "joints.", tuple(joint_of))
+    check_keys(side_joints, "joints.", tuple(joint_of), what="URDF sidecar")
     for name, entry in side_joints.items():
-        _check_keys(entry, f"joints.{name}.", _SIDECAR["joints"])
+        check_keys(entry, f"joints.{name}.", _SIDECAR["joints"], what="URDF sidecar")
         if "locked_deg" in entry and "locked_m" in entry:
             raise ValueError(f"URDF sidecar: joints.{name}: give locked_deg or locked_m, not both")
         kind = joint_of[name].type
@@ -414,7 +404,7 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         if not isinstance(side["markers"], list):
             raise ValueError("URDF sidecar: markers must be a list")
         for i, mk in enumerate(side["markers"]):
-            _check_keys(mk, f"markers[{i}].", _SIDECAR["markers"])
+            check_keys(mk, f"markers[{i}].", _SIDECAR["markers"], what="URDF sidecar")
             if mk.get("link") not in links:
                 raise ValueError(
                     f"URDF sidecar: markers[{i}].link {mk.get('link')!r} is not a link"
