@@ -23,7 +23,14 @@ cells = [
         'jax.config.update("jax_enable_x64", True)\n'
         "import jaxcal\n"
         "jaxcal.enable_compilation_cache()  # compiled programs kept on disk (jaxcal cache info)\n"
-        "import json, time\n"
+        "import json, os, time\n"
+        "# 'full' (default): the trial counts the text describes; 'ci': the test suite's\n"
+        "# smaller studies (same code)\n"
+        "SCALE = os.environ.get('JAXCAL_NOTEBOOK_SCALE', 'full')\n"
+        "assert SCALE in ('full', 'ci'), SCALE\n"
+        "TRIALS = 5_000 if SCALE == 'full' else 1_000  # two-step and linear studies\n"
+        "PROOF_TRIALS = 1000 if SCALE == 'full' else 100  # nonlinear studies\n"
+        "N_RANDOM = 200 if SCALE == 'full' else 50  # random designs ranked\n"
         "from pathlib import Path\n"
         "import numpy as np\n"
         "import matplotlib.pyplot as plt\n"
@@ -75,7 +82,7 @@ cells = [
     ),
     code(
         "repeats = np.array([1, 2, 4, 8, 16])\n"
-        "sweep = noise_sweep(robot, designs['paper'], SIGMA / np.sqrt(repeats), trials=5_000,\n"
+        "sweep = noise_sweep(robot, designs['paper'], SIGMA / np.sqrt(repeats), trials=TRIALS,\n"
         "                    method='two-step', free=FREE, keep_estimates=True, seed=1)\n"
         "paper = sweep[0]\n"
         "print(f'{paper.trials} trials, {paper.failed} failed, {paper.seconds:.2f} s '\n"
@@ -118,7 +125,7 @@ cells = [
     code(
         "studies = {'paper': paper}\n"
         "for name in [n for n in designs if n != 'paper']:\n"
-        "    studies[name] = monte_carlo(robot, designs[name], trials=5_000, method='two-step',\n"
+        "    studies[name] = monte_carlo(robot, designs[name], trials=TRIALS, method='two-step',\n"
         "                                free=FREE, seed=1)\n"
         "names = paper.names\n"
         "width = 0.8 / len(studies)\n"
@@ -127,7 +134,7 @@ cells = [
         "    ax.bar(np.arange(len(names)) + j * width, r.rmse / np.abs(r.true), width, label=label)\n"
         "ax.set_yscale('log'); ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2)\n"
         "ax.set_xticklabels([n.split('_')[0] for n in names]); ax.set_ylabel('relative RMSE')\n"
-        "ax.legend(fontsize=8); ax.set_title('two-step identification, σ = 0.02 mm, 5 000 trials');\n"
+        "ax.legend(fontsize=8); ax.set_title(f'two-step identification, σ = 0.02 mm, {TRIALS:,} trials'.replace(',', ' '));\n"
         "for label, r in studies.items():\n"
         "    i, j = r.names.index('Kc_N_per_m'), r.names.index('s0_m')\n"
         "    print(f'{label:10s} Kc rel. RMSE {r.rmse[i] / r.true[i]:.3f}   s0 rel. RMSE '\n"
@@ -148,7 +155,7 @@ cells = [
     ),
     code(
         "scales = [0.25, 0.5, 1.0]\n"
-        "by_load = load_sweep(robot, designs['paper'], scales, trials=5_000, method='two-step',\n"
+        "by_load = load_sweep(robot, designs['paper'], scales, trials=TRIALS, method='two-step',\n"
         "                     free=FREE, seed=2)\n"
         "for a, r in zip(scales, by_load):\n"
         "    i, j = r.names.index('Kc_N_per_m'), r.names.index('s0_m')\n"
@@ -168,7 +175,7 @@ cells = [
     ),
     code(
         "FREE6 = [n for n in FREE if n.startswith('k')]\n"
-        "lin = load_sweep(robot, designs['paper'], scales, trials=5_000, method='linear',\n"
+        "lin = load_sweep(robot, designs['paper'], scales, trials=TRIALS, method='linear',\n"
         "                 free=FREE6, seed=4)\n"
         "fig, ax = plt.subplots(figsize=(6, 3.4))\n"
         "for j, n in enumerate(lin[0].names):\n"
@@ -191,14 +198,14 @@ cells = [
     ),
     code(
         "from jaxcal import rank_random_designs\n"
-        "q_rand, _ = rank_random_designs(robot, 200, seed=0)\n"
+        "q_rand, _ = rank_random_designs(robot, N_RANDOM, seed=0)\n"
         "proof = {'paper Table 5': designs['paper'], 'median random': make(q_rand[len(q_rand) // 2]),\n"
         "         'best random': make(q_rand[0])}\n"
         "if 'optimised' in designs:\n"
         "    proof = {'default': designs['optimised'], **proof}\n"
         "mcp = {}\n"
         "for lab, ds in proof.items():\n"
-        "    mcp[lab] = monte_carlo(robot, ds, trials=1000, method='nonlinear', free=FREE, seed=7,\n"
+        "    mcp[lab] = monte_carlo(robot, ds, trials=PROOF_TRIALS, method='nonlinear', free=FREE, seed=7,\n"
         "                           keep_estimates=True)\n"
         "    print(f'{lab:14s} {mcp[lab].trials} trials, {mcp[lab].failed} failed, '\n"
         "          f'compile {mcp[lab].compile_seconds:.1f} s, run {mcp[lab].seconds:.1f} s')\n"

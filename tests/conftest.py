@@ -12,6 +12,17 @@ import pytest
 jax.config.update("jax_enable_x64", True)
 
 
+def pytest_addoption(parser):
+    parser.addoption(
+        "--notebook-scale",
+        choices=("ci", "full"),
+        default="ci",
+        help="settings of the notebooks that tests/test_notebooks.py executes, passed to them "
+        "as JAXCAL_NOTEBOOK_SCALE: 'ci' (default) smaller studies, 'full' the settings their "
+        "text describes (what a user running them gets)",
+    )
+
+
 def pytest_configure(config):
     # The command line (run in-process by the tests) and the notebooks turn on the
     # persistent compilation cache. Point it at a directory of this run, shared by the

@@ -1,5 +1,10 @@
 """Every notebook in `notebooks/` runs from top to bottom without error, in a scratch
-copy of the folder, on a kernel of *this* interpreter (the test environment's jaxcal)."""
+copy of the folder, on a kernel of *this* interpreter (the test environment's jaxcal).
+
+Notebooks whose studies take minutes read one parameter in their first code cell,
+`JAXCAL_NOTEBOOK_SCALE`: `full` (their default, what a user gets) or `ci` (smaller
+studies, same code). The tests run them at `ci` unless pytest is given
+`--notebook-scale=full`."""
 
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from nbclient import NotebookClient
 
 ROOT = Path(__file__).parent.parent
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-CELL_TIMEOUT_S = 300  # per cell; the notebooks themselves take < 40 s in all
+CELL_TIMEOUT_S = 300  # per cell
 
 
 def test_the_first_notebook_exists():
@@ -23,7 +28,9 @@ def test_the_first_notebook_exists():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
-def test_notebook_executes(path, tmp_path):
+def test_notebook_executes(path, tmp_path, monkeypatch, request):
+    # The kernel inherits this environment.
+    monkeypatch.setenv("JAXCAL_NOTEBOOK_SCALE", request.config.getoption("--notebook-scale"))
     # Work on a copy so that files a notebook writes never land in the repository;
     # `tests/` is linked beside it for notebooks that read the example data.
     work = tmp_path / "notebooks"
@@ -63,6 +70,11 @@ def test_notebook_saved_with_outputs(path):
     assert nb.cells[0].cell_type == "markdown"
     first_code = code[0].source
     assert 'jax.config.update("jax_enable_x64", True)' in first_code
+    # The scale parameter, where a notebook has one, is read once, first, and defaults to
+    # the full settings (the saved outputs are those of a full run).
+    if any("JAXCAL_NOTEBOOK_SCALE" in c.source for c in code):
+        assert all("JAXCAL_NOTEBOOK_SCALE" not in c.source for c in code[1:])
+        assert "os.environ.get('JAXCAL_NOTEBOOK_SCALE', 'full')" in first_code
 
 
 def test_kernel_resolves_to_this_interpreter():
