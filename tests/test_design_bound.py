@@ -122,11 +122,15 @@ def _rmse_ratio(a, b):
 
 @pytest.mark.slow
 def test_default_design_proven_by_repeated_experiments(robot, default_design):
-    # Simulated experiments per design, nonlinear fit on the full
-    # model (k1 held: vertical loads), sigma = 0.02 mm. Tolerance: 3 standard errors of
-    # the log RMSE ratio, about 0.022 with 2000 trials: the smallest gain the linearised
-    # covariance predicts (k4 against the median random design, 0.91 on the optimiser's
-    # neighbouring local optima) is then resolved; with 1000 trials it is borderline.
+    # Simulated experiments per design, nonlinear fit on the full model (k1 held: vertical
+    # loads), sigma = 0.02 mm, 500 trials: the first 500 of the 2000-trial study in
+    # `benchmarks/bench_design_proof.py` (trial i's noise depends only on the seed and i),
+    # whose figures are in benchmarks/README.md. The standard error of a log RMSE ratio is
+    # about 0.022 at 2000 trials, 0.044 at 500. Asserted at 3 standard errors where the
+    # gain is resolved at 500 trials: every gain over the median random design but k4's
+    # (predicted 0.91 on the optimiser's neighbouring local optima, log -0.094: 2.1
+    # standard errors here, resolved by the 2000-trial study); for k4 its sign only, which
+    # fails with probability P(Z > 2.1) = 0.018 for a correct design.
     q_def = np.deg2rad(np.asarray(default_design["configs_deg"]))
     q_rand, _ = jaxcal.rank_random_designs(robot, 200, seed=0)
     free = [n for n in robot.parameter_names if n != "k1_urad_per_Nm"]
@@ -139,7 +143,7 @@ def test_default_design_proven_by_repeated_experiments(robot, default_design):
         F = np.asarray(jaxcal.design_loads(robot, jnp.asarray(q)))
         ds = jaxcal.Dataset.from_arrays(np.rad2deg(q), F, sigma_mm=0.02)
         mc[label] = jaxcal.monte_carlo(
-            robot, ds, trials=2000, method="nonlinear", free=free, seed=7, keep_estimates=True
+            robot, ds, trials=500, method="nonlinear", free=free, seed=7, keep_estimates=True
         )
         assert mc[label].failed == 0, label
     # The nonlinear study takes the design as arguments: one compiled program serves
@@ -155,9 +159,11 @@ def test_default_design_proven_by_repeated_experiments(robot, default_design):
                 # No worse than the paper's plan for every compliance (k2: the
                 # linearised covariance predicts 1.04, inside the tolerance).
                 assert lr[j] <= 3 * se[j], (other, n)
-            if other == "median" and n in ("k2", "k4", "k5", "k6"):
+            if other == "median" and n in ("k2", "k5", "k6"):
                 # Better than the median random design (significantly).
                 assert lr[j] <= -3 * se[j], (other, n)
+            if other == "median" and n == "k4":
+                assert lr[j] < 0, (other, n)
     # NOT asserted, as measured: k3 is *worse* than the median random design's
     # (1.17 ± 0.03): the trace criterion gives k3 0.07 % of its weight (k6: 85 %), and
     # the median design by the trace happens to be a good one for k3.
