@@ -118,8 +118,9 @@ print(json.dumps(rep.to_json() | {"candidates": "..."}, indent=1))""",
 joint nonlinearity, both link bendings, tool compliance, and the compensator on a robot
 file that declares none — in 10 noise seeds, plus 10 seeds with no effect, and runs the
 full workflow (all candidates) on each. It takes minutes, so this notebook loads its
-precomputed output `05_discrepancy_study.json` (tests/test_discrepancy.py runs the same
-workflow on the first 3 seeds of every case).
+precomputed output `05_discrepancy_study.json` (`benchmarks/bench_discrepancy_study.py`
+reruns it and reports its statistics; tests/test_discrepancy.py runs the same workflow on
+the first seed of every case).
 
 **How big is a hidden effect?** Each effect is sized by the *gap it leaves*: the largest
 row residual, after the nominal model (every compliance and the compensator

@@ -1,0 +1,113 @@
+"""Benchmark: the discrepancy workflow's seeds study, in full.
+
+Every candidate effect (backlash and nonlinearity in each joint, both link bendings,
+tool compliance, and the compensator on a robot file that declares none) is hidden in
+data simulated on the 48-row example design, sized so that the gap it leaves after the
+nominal refit is 5σ in its largest row, in `--seeds` noise seeds, plus as many seeds with
+no effect; every data set goes through `jaxcal.discover_batch` with all candidates
+(`notebooks/_discrepancy_study.py: run_study`). Reported per case, over the seeds, the
+statistics that `tests/test_discrepancy.py` checks on the first seed only:
+
+- named: the effect (and joint) named, or "none" for the case without an effect
+  (the claim: ≥ 9 of 10);
+- χ² band: χ²_red after adding the named effect within 1 ± 3·sqrt(2/ν);
+- detected: the nominal fit's χ² with the effect hidden above that of the same seed
+  without one;
+- max |z|: (fitted − true)/std of the named effect's parameters (claim: < 4).
+
+Run: `python benchmarks/bench_discrepancy_study.py [--seeds 10] [--perturbed] [--json FILE]`
+(`--perturbed`: the true nominal parameters off the robot file's by a fixed ±15 % draw).
+`python notebooks/_discrepancy_study.py` writes the same study as the notebook's JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import jaxcal  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _study_module():
+    spec = importlib.util.spec_from_file_location(
+        "_discrepancy_study", ROOT / "notebooks" / "_discrepancy_study.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--perturbed", action="store_true")
+    ap.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    args = ap.parse_args()
+    study = _study_module()
+    robot = jaxcal.load_robot()
+    data = jaxcal.read_dataset(ROOT / "tests" / "data" / "example_calibration.csv", robot)
+    t0 = time.perf_counter()
+    res = study.run_study(robot, data, seeds=range(args.seeds), perturbed=args.perturbed)
+    seconds = time.perf_counter() - t0
+    chi2_before = {
+        c: np.array([r.chi2_red_before * r.dof_before for r in res[c]["reports"]]) for c in res
+    }
+    rows = {}
+    for case in study.CASES:
+        r = res[case]
+        named = sum(n == case for n in r["named"])
+        row = {"named": named, "seeds": args.seeds}
+        if case != "none":
+            ok = [rep for rep, n in zip(r["reports"], r["named"], strict=True) if n == case]
+            row["chi2_band"] = sum(
+                abs(rep.chi2_red_after - 1) <= 3 * math.sqrt(2 / rep.dof_after) for rep in ok
+            )
+            truth = np.atleast_1d(r["truth"])
+            z = [
+                abs(v - t) / sd
+                for rep in ok
+                for (v, sd), t in zip(rep.params.values(), truth, strict=True)
+            ]
+            row["max_abs_z"] = float(max(z)) if z else None
+            row["detected"] = int(np.sum(chi2_before[case] > chi2_before["none"]))
+        else:
+            row["p_values"] = [float(rep.p_value_before) for rep in r["reports"]]
+        rows[case] = row
+    print(f"{'case':24s} {'named':>6s} {'χ² band':>8s} {'detected':>9s} {'max |z|':>8s}")
+    for case, row in rows.items():
+        if case == "none":
+            p = np.round(row["p_values"], 3).tolist()
+            print(f"{case:24s} {row['named']:>3d}/{args.seeds:<2d}  p-values {p}")
+            continue
+        z = "-" if row["max_abs_z"] is None else f"{row['max_abs_z']:.2f}"
+        band = f"{row['chi2_band']}/{row['named']}"
+        print(
+            f"{case:24s} {row['named']:>3d}/{args.seeds:<2d} {band:>8s}"
+            f" {row['detected']:>6d}/{args.seeds:<2d} {z:>8s}"
+        )
+    misses = sum(args.seeds - row["named"] for row in rows.values())
+    print(
+        f"\n{len(rows) * args.seeds} data sets, {misses} not named as hidden; "
+        f"{seconds:.0f} s wall on {os.cpu_count()} CPUs ({jax.default_backend()})"
+    )
+    if args.json:
+        out = {"seeds": args.seeds, "perturbed": args.perturbed, "seconds": seconds}
+        Path(args.json).write_text(json.dumps({**out, "cases": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
