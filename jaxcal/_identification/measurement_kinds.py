@@ -30,8 +30,8 @@ from .._linalg.covariance import covariance_from_jacobian
 from .._model.tree import TreeRobot
 from .._model.tree_statics import (
     marker_index,
+    marker_pose,
     marker_positions,
-    tree_deflection,
     tree_equilibrium,
 )
 from .elastogeometric import pivoted_subset
@@ -61,19 +61,17 @@ def _jacobians(robot, table, interest, q, force, moment, at):
     p0 = get_vector(robot, table)
     sel = jnp.asarray(interest, int)
 
-    def deflection(p, q, f, m):
-        return tree_deflection(set_vector(robot, table, p), q, f, m, at=at)[0]
-
-    def absolute(p, q, f, m):
+    def both(p, q, f, m):
+        # One pair of equilibria serves both kinds: the deflection (base frame) and the
+        # two absolute positions (measurement frame).
         r = set_vector(robot, table, p)
         loaded = tree_equilibrium(r, q, force=f, moment=m, at=at)
         free = tree_equilibrium(r, q)
-        return jnp.stack(
-            [marker_positions(r, q, loaded.phi)[at], marker_positions(r, q, free.phi)[at]]
-        )
+        dp = marker_pose(r, q, loaded.phi, at)[1] - marker_pose(r, q, free.phi, at)[1]
+        seen = [marker_positions(r, q, loaded.phi)[at], marker_positions(r, q, free.phi)[at]]
+        return dp, jnp.stack(seen)
 
-    Jd = jax.vmap(jax.jacfwd(deflection), in_axes=(None, 0, 0, 0))(p0, q, force, moment)
-    Ja = jax.vmap(jax.jacfwd(absolute), in_axes=(None, 0, 0, 0))(p0, q, force, moment)
+    Jd, Ja = jax.vmap(jax.jacfwd(both), in_axes=(None, 0, 0, 0))(p0, q, force, moment)
     return Jd[..., sel].reshape(-1, sel.shape[0]), Ja.reshape(-1, len(table))
 
 
