@@ -60,6 +60,7 @@ from ._identification.methods import (
 from ._identification.parameter_groups import (
     PARAMETER_GROUPS as PARAMETER_GROUPS,
     Parameter as Parameter,
+    default_groups as default_groups,
     parameter_table as parameter_table,
 )
 from ._identification.two_step import (
@@ -162,6 +163,7 @@ from ._model.urdf import (
     load_urdf as load_urdf,
     tree_dict_from_urdf as tree_dict_from_urdf,
 )
+from ._model.urdf_export import save_urdf as save_urdf, tree_to_urdf as tree_to_urdf
 from ._parameters import (
     get_parameters as get_parameters,
     parameter_names as parameter_names,

@@ -23,6 +23,9 @@ def check_keys(
         return
     for k in obj:
         if k not in known:
-            near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+            # A key missing its unit (`compliance` for `compliance_urad_per_Nm`) is the
+            # commonest slip: a known key it begins first, then the closest spelling.
+            near = [c for c in known if c.startswith(f"{k}_")][:1]
+            near = near or difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
             hint = f"; did you mean {near[0]!r}?" if near else ""
             raise ValueError(f"{what}: unknown key {where}{k!r}{hint} (known: {', '.join(known)})")

@@ -249,6 +249,147 @@ def test_mimic_joints_equal_pinocchio_with_the_mimic_relation(data):
     np.testing.assert_allclose(_omega(dF, F), pJ[:, 3:] @ chain, rtol=0, atol=TOL)
 
 
+# A gantry: a prismatic joint along a skew axis, a revolute joint, a prismatic joint
+# along −y and a finger mimicking it (multiplier −1, offset); masses on every link.
+SLIDE_URDF = """<?xml version="1.0"?>
+<robot name="gantry">
+  <link name="base"/>
+  <link name="carriage">
+    <inertial><origin xyz="0.05 0.01 0.02"/><mass value="4.0"/>
+      <inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>
+  </link>
+  <link name="arm">
+    <inertial><origin xyz="0.2 0.03 -0.1"/><mass value="2.5"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+  </link>
+  <link name="ram">
+    <inertial><origin xyz="0 0.02 0.15"/><mass value="1.2"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+  </link>
+  <link name="finger">
+    <inertial><origin xyz="0.01 0 0.03"/><mass value="0.3"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+  </link>
+  <joint name="x" type="prismatic">
+    <parent link="base"/><child link="carriage"/>
+    <origin xyz="0.1 -0.2 0.8" rpy="0.1 0.2 -0.3"/><axis xyz="1 0.2 0.1"/>
+    <limit lower="-0.5" upper="1.5" effort="100" velocity="1"/>
+  </joint>
+  <joint name="turn" type="revolute">
+    <parent link="carriage"/><child link="arm"/>
+    <origin xyz="0.1 0 -0.05" rpy="0 0.4 0"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="10" velocity="1"/>
+  </joint>
+  <joint name="ram_joint" type="prismatic">
+    <parent link="arm"/><child link="ram"/>
+    <origin xyz="0.4 0 -0.1" rpy="0.2 0 0.5"/><axis xyz="0 -1 0"/>
+    <limit lower="-0.3" upper="0.3" effort="100" velocity="1"/>
+  </joint>
+  <joint name="finger_joint" type="prismatic">
+    <parent link="ram"/><child link="finger"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-0.1" upper="0.1" effort="100" velocity="1"/>
+    <mimic joint="ram_joint" multiplier="-1" offset="0.02"/>
+  </joint>
+</robot>
+"""
+
+
+@functools.cache
+def slide_case() -> Case:
+    return Case(SLIDE_URDF, None, {}, xml=True)
+
+
+def test_prismatic_joints_are_sliding_elements_with_limits_in_metres():
+    d = jaxcal.tree_dict_from_urdf(SLIDE_URDF)
+    assert [j["name"] for j in d["joints"]] == ["x", "turn", "ram_joint"]
+    assert d["joints"][0]["limits_m"] == [-0.5, 1.5] and "limits_deg" not in d["joints"][0]
+    el = {e["name"]: e for e in d["elements"]}
+    assert el["x"]["type"] == "prismatic" and "type" not in el["arm"]
+    assert el["finger"]["coupling"] == {"ram_joint": -1.0}
+    assert el["finger"]["dh"] == pytest.approx({"d_m": 0.02})
+    robot = jaxcal.tree_from_dict(d)
+    assert robot.joint_prismatic == (True, False, True)
+    np.testing.assert_allclose(robot.joint_limits[2], [-0.3, 0.3])
+    # The robot file says it back: type, axial compliance and limits in metres.
+    back = jaxcal.tree_from_dict(jaxcal.tree_to_dict(robot))
+    assert back.sliding == robot.sliding
+    np.testing.assert_allclose(back.joint_limits, robot.joint_limits, rtol=0, atol=1e-10)
+
+
+@SETTINGS
+@given(data=st.data())
+def test_prismatic_joints_equal_pinocchio(data):
+    c = slide_case()
+    x, ram = (data.draw(st.floats(-0.3, 0.3)) for _ in range(2))
+    turn = data.draw(st.floats(-2.0, 2.0))
+    frames, force, dframes = (np.asarray(x) for x in c.evaluate(jnp.asarray([x, turn, ram])))
+    pf, pg, pJ = c.pinocchio({"x": x, "turn": turn, "ram_joint": ram, "finger_joint": 0.02 - ram})
+    v = {n: c.v_index(n) for n in ("x", "turn", "ram_joint", "finger_joint")}
+    chain = np.zeros((c.model.nv, 3))
+    chain[v["x"], 0], chain[v["turn"], 1], chain[v["ram_joint"], 2] = 1.0, 1.0, 1.0
+    chain[v["finger_joint"], 2] = -1.0
+
+    np.testing.assert_allclose(frames[c.element], pf, rtol=0, atol=TOL)
+    np.testing.assert_allclose(force, chain.T @ pg, rtol=0, atol=TOL)  # N for a slide
+    F, dF = frames[c.element], dframes[c.element]
+    np.testing.assert_allclose(dF[:, :3, 3], pJ[:, :3] @ chain, rtol=0, atol=TOL)
+    np.testing.assert_allclose(_omega(dF, F), pJ[:, 3:] @ chain, rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("name", ["ur5", "slide"])
+def test_cartesian_compliance_equals_j_kinv_jt_from_pinocchio(name):
+    """Without gravity, the tool's deflection per unit wrench (the derivative of the
+    static equilibrium by the implicit function theorem) is J K⁻¹ Jᵀ, J Pinocchio's
+    frame Jacobian of the tool link (LOCAL_WORLD_ALIGNED) and K the joint springs;
+    a finite wrench deflects the tool by that up to the springs' second order."""
+    if name == "ur5":
+        path, xml, link = ROBOT_DATA / CASES["ur5"][0], False, "tool0"
+    else:
+        path, xml, link = SLIDE_URDF, True, "ram"
+    free = jaxcal.load_urdf(path)
+    kappa, side_joints = {}, {}
+    for k, (j, slides) in enumerate(zip(free.joint_names, free.joint_prismatic, strict=True)):
+        kappa[j] = (1.0 + 0.5 * k) * 1e-6  # rad/(N·m), m/N for a slide
+        key = "axial_compliance_um_per_N" if slides else "compliance_urad_per_Nm"
+        value = 1.0 + 0.5 * k if slides else [1.0 + 0.5 * k, 0.0, 0.0]
+        side_joints[j] = {key: value, "springs": ["theta"]}
+    sidecar = {
+        "joints": side_joints,
+        "markers": [{"name": "tool", "link": link}],
+        "gravity_m_per_s2": [0.0, 0.0, 0.0],
+    }
+    robot = jaxcal.load_urdf(path, sidecar)
+    model = pin.buildModelFromXML(path) if xml else pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    rng = np.random.default_rng(3)
+    lim = np.asarray(robot.joint_limits)
+    q = lim[:, 0] + (lim[:, 1] - lim[:, 0]) * rng.uniform(0.2, 0.8, robot.n_joints)
+    values = dict(zip(robot.joint_names, q, strict=True))
+    chain = np.zeros((model.nv, robot.n_joints))
+    for k, j in enumerate(robot.joint_names):
+        chain[model.joints[model.getJointId(j)].idx_v, k] = 1.0
+    if name == "slide":
+        values["finger_joint"] = 0.02 - values["ram_joint"]
+    qp = _pin_q(model, values)
+    pin.computeJointJacobians(model, data, qp)
+    pin.framesForwardKinematics(model, data, qp)
+    f = model.getFrameId(link, pin.BODY)
+    J = pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED) @ chain
+    C = J @ np.diag([kappa[j] for j in robot.joint_names]) @ J.T
+
+    def tool(w):
+        dp, ok = jaxcal.tree_deflection(robot, jnp.asarray(q), w[:3], w[3:], at="tool")
+        return dp
+
+    w = np.array([120.0, -80.0, 200.0, 15.0, -10.0, 5.0])  # N, N·m
+    both = jax.jit(lambda w: (jax.jacfwd(tool)(jnp.zeros_like(w)), tool(w)))
+    dCdw, dp = (np.asarray(x) for x in both(jnp.asarray(w)))
+    np.testing.assert_allclose(dCdw, C[:3], rtol=0, atol=1e-9 * np.abs(C).max())
+    second = np.abs(C).max() * np.abs(w).max() * np.abs(J).max() * max(kappa.values())
+    assert np.abs(dp - C[:3] @ w).max() < 10 * second * np.abs(w).max()
+
+
 def test_sidecar_gives_compliances_markers_world_and_the_defaults_are_stated():
     plain = jaxcal.load_urdf(MIMIC_URDF)
     for said in ("zero compliances", "markers at the origins", "world frame", "gravity"):
@@ -299,10 +440,23 @@ def _arm(joint2: str) -> str:
     [
         (
             _arm(
-                '<joint name="slide" type="prismatic"><parent link="b"/><child link="c"/>'
+                '<joint name="plane" type="planar"><parent link="b"/><child link="c"/>'
                 '<limit lower="0" upper="1" effort="1" velocity="1"/></joint>'
             ),
-            r"joint 'slide' is prismatic.*no prismatic motion",
+            r"joint 'plane' is planar.*no planar motion",
+        ),
+        (
+            _arm(
+                '<joint name="slide" type="prismatic"><parent link="b"/><child link="c"/></joint>'
+            ),
+            r"prismatic joint 'slide' needs <limit lower upper>",
+        ),
+        (
+            _arm(
+                '<joint name="slide" type="prismatic"><parent link="b"/><child link="c"/>'
+                '<limit lower="0" upper="1" effort="1" velocity="1"/><mimic joint="j1"/></joint>'
+            ),
+            r"joint 'slide' \(prismatic\) mimics 'j1' \(revolute\)",
         ),
         (
             _arm(

@@ -27,7 +27,13 @@ from .._model.tree import TreeRobot
 from .._model.tree_statics import predict_markers
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
-from .parameter_groups import DEFAULT_GROUPS, Parameter, get_vector, parameter_table, set_vector
+from .parameter_groups import (
+    Parameter,
+    default_groups,
+    get_vector,
+    parameter_table,
+    set_vector,
+)
 
 __all__ = [
     "TreeCalibration",
@@ -163,7 +169,7 @@ def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
 def calibrate_tree(
     robot: TreeRobot,
     data: MarkerData,
-    groups: tuple[str, ...] = DEFAULT_GROUPS,
+    groups: tuple[str, ...] | None = None,
     *,
     fit_groups: tuple[str, ...] | None = None,
     hold: tuple[str, ...] = (),
@@ -173,13 +179,15 @@ def calibrate_tree(
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
 
-    `groups` is the parameter table the program is built for (keep it the same across
-    fits to share one compilation); `hold` names parameters to hold in any case. Never
-    raises on a failed fit: see `converged` and `message`.
+    `groups` (default: `default_groups(robot)`) is the parameter table the program is
+    built for (keep it the same across fits to share one compilation); `hold` names
+    parameters to hold in any case. Never raises on a failed fit: see `converged` and
+    `message`.
     """
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
     t0 = time.perf_counter()
+    groups = default_groups(robot) if groups is None else groups
     fit_groups = groups if fit_groups is None else fit_groups
     table = parameter_table(robot, groups)
     names = {p.name for p in table}
@@ -273,7 +281,7 @@ def validate_tree(
     robot: TreeRobot,
     train: MarkerData,
     test: MarkerData,
-    groups: tuple[str, ...] = DEFAULT_GROUPS,
+    groups: tuple[str, ...] | None = None,
     *,
     progress=None,
 ) -> list[Stage]:
@@ -283,6 +291,7 @@ def validate_tree(
     stage's estimate instead lands in a long valley of the near-redundant geometry
     that Levenberg–Marquardt does not leave within its step budget."""
     out: list[Stage] = []
+    groups = default_groups(robot) if groups is None else groups
     for k in range(1, len(groups) + 1):
         cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k])
         e = marker_errors(cal.robot, test) * 1e3

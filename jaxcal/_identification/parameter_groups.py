@@ -8,9 +8,11 @@ printed name is the same.
 Groups, in the order a calibration adds them:
 
 - `frames`: the base's pose in the measurement frame (6) and each marker's offset (3);
-- `joint-offsets`: θ of each moving element;
-- `dh`: d, a, α of each moving element;
-- `joint-compliance`: the spring about each joint axis, κθ;
+- `joint-offsets`: θ of each moving element (d of a prismatic one);
+- `dh`: d (θ if prismatic), a, α of each moving element;
+- `origins`: the six numbers of each moving element's origin (x, y, z, roll, pitch,
+  yaw): a URDF joint's origin, for robots whose file says `geometric_errors: origins`;
+- `joint-compliance`: the spring about (along, if prismatic) each joint axis, κθ;
 - `lateral-compliance`: the two springs about the perpendicular axes, κα, κβ;
 - `masses`: each point mass (kg);
 - `spring-laws`: the parameters of each spring law (e.g. a compensator's Kc, s0);
@@ -38,21 +40,29 @@ __all__ = [
     "get_vector",
     "set_vector",
     "parse_groups",
+    "default_groups",
 ]
 
 GROUPS: tuple[str, ...] = (
     "frames",
     "joint-offsets",
     "dh",
+    "origins",
     "joint-compliance",
     "lateral-compliance",
     "masses",
     "spring-laws",
 )
-#: The full calibration when no groups are named: geometry and springs. Masses and
-#: spring-law parameters are fitted on request: under the robot's weight alone a mass
-#: and the compliances it loads move the markers together.
-DEFAULT_GROUPS: tuple[str, ...] = GROUPS[:5]
+#: The full calibration of a DH robot when no groups are named: geometry and springs.
+#: Masses and spring-law parameters are fitted on request: under the robot's weight
+#: alone a mass and the compliances it loads move the markers together.
+DEFAULT_GROUPS: tuple[str, ...] = (
+    "frames",
+    "joint-offsets",
+    "dh",
+    "joint-compliance",
+    "lateral-compliance",
+)
 #: The public name of `GROUPS`.
 PARAMETER_GROUPS = GROUPS
 
@@ -95,26 +105,43 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                     out.append(Parameter(f"{m}.{a}", g, "marker_at", (k, i), "mm", 1e3, _MM))
         elif g == "joint-offsets":
             for e in moving:
-                out.append(Parameter(f"{robot.names[e]}.theta", g, "dh", (e, 1), "deg", deg, _MRAD))
+                n = robot.names[e]
+                if robot.sliding[e]:  # a slide's offset is its d
+                    out.append(Parameter(f"{n}.d", g, "dh", (e, 0), "mm", 1e3, _MM))
+                else:
+                    out.append(Parameter(f"{n}.theta", g, "dh", (e, 1), "deg", deg, _MRAD))
         elif g == "dh":
             for e in moving:
                 n = robot.names[e]
-                out.append(Parameter(f"{n}.d", g, "dh", (e, 0), "mm", 1e3, _MM))
+                if robot.sliding[e]:
+                    out.append(Parameter(f"{n}.theta", g, "dh", (e, 1), "deg", deg, _MRAD))
+                else:
+                    out.append(Parameter(f"{n}.d", g, "dh", (e, 0), "mm", 1e3, _MM))
                 out.append(Parameter(f"{n}.a", g, "dh", (e, 2), "mm", 1e3, _MM))
                 out.append(Parameter(f"{n}.alpha", g, "dh", (e, 3), "deg", deg, _MRAD))
+        elif g == "origins":
+            for e in moving:
+                n = robot.names[e]
+                for i, a in enumerate(("x", "y", "z")):
+                    out.append(Parameter(f"{n}.origin.{a}", g, "origin", (e, i), "mm", 1e3, _MM))
+                for i, a in enumerate(("roll", "pitch", "yaw")):
+                    out.append(
+                        Parameter(f"{n}.origin.{a}", g, "origin", (e, 3 + i), "deg", deg, _MRAD)
+                    )
         elif g == "joint-compliance":
             for e in moving:
                 if not robot.springs[e][0]:
                     continue
+                slides = robot.sliding[e]
                 out.append(
                     Parameter(
-                        f"{robot.names[e]}.k_theta",
+                        f"{robot.names[e]}.k_{'axial' if slides else 'theta'}",
                         g,
                         "compliance",
                         (e, 0),
-                        "µrad/(N·m)",
+                        "µm/N" if slides else "µrad/(N·m)",
                         1e6,
-                        _COMP,
+                        _COMP * 1e-2 if slides else _COMP,  # 0.1 µm/N: a stiff slide
                     )
                 )
         elif g == "masses":
@@ -203,11 +230,20 @@ def set_vector(robot: TreeRobot, table: tuple[Parameter, ...], p: Float[Array, "
     )
 
 
-def parse_groups(text: str | None) -> tuple[str, ...]:
+def default_groups(robot: TreeRobot | None = None) -> tuple[str, ...]:
+    """The full calibration of `robot`: `DEFAULT_GROUPS`, with the joint origins'
+    errors in place of the DH rows' for a robot whose file says
+    `geometric_errors: origins` (a URDF robot)."""
+    if robot is not None and robot.geometric_errors == "origins":
+        return tuple("origins" if g == "dh" else g for g in DEFAULT_GROUPS)
+    return DEFAULT_GROUPS
+
+
+def parse_groups(text: str | None, robot: TreeRobot | None = None) -> tuple[str, ...]:
     """`--params` text (comma-separated group names) to a tuple in `GROUPS` order;
-    `None` or empty: `DEFAULT_GROUPS`."""
+    `None` or empty: `default_groups(robot)`."""
     if not text:
-        return DEFAULT_GROUPS
+        return default_groups(robot)
     names = [s.strip() for s in text.split(",") if s.strip()]
     unknown = [n for n in names if n not in GROUPS]
     if unknown:

@@ -1,5 +1,5 @@
-"""A general robot: a kinematic tree of revolute joints and fixed frames, with point
-masses, marker frames and virtual springs, read from a robot file.
+"""A general robot: a kinematic tree of revolute and prismatic joints and fixed frames,
+with point masses, marker frames and virtual springs, read from a robot file.
 
 Each element of the tree is a fixed origin transform followed by a motion about its z
 axis (URDF's model). The origin is written as a translation and roll-pitch-yaw
@@ -9,7 +9,10 @@ axis (URDF's model). The origin is written as a translation and roll-pitch-yaw
                        · Rx(α) · Trans_x(a) · Ry(β) · Rz(θ) · Trans_z(d) · Rz(q)
 
 so a DH row, a fixed frame and a URDF joint origin are all the same thing with some
-numbers zero (`β` is Hayati's extra angle for near-parallel axes).
+numbers zero (`β` is Hayati's extra angle for near-parallel axes). A *prismatic* element
+(`"type": "prismatic"`) slides instead: `... · Rz(θ) · Trans_z(d + s)`, its value `s`
+(m) taking the place of the angle everywhere below, and its joint spring is axial
+(compliance in m/N; robot file: `axial_compliance_um_per_N`, joint limits `limits_m`).
 
 Each active joint `j` is driven through a spring: its link-side angle is `q_j + θ_j`,
 with `θ_j` the deflection of the joint spring of its *drive element* (by default the
@@ -63,21 +66,25 @@ class TreeRobot(eqx.Module):
     - `origin`: `(e, 6)` fixed translation (m) and roll, pitch, yaw (rad) of each element.
     - `dh`: `(e, 5)` modified DH row `(d, θ, a, α, β)` (m, rad, m, rad, rad).
     - `compliance`: `(e, 3)` spring compliances about z (the joint), x and y (lateral),
-      rad/(N·m); zero rows for fixed elements.
+      rad/(N·m) (along z, m/N, for a prismatic element); zero rows for fixed elements.
     - `mass_kg`, `mass_at`: `(m,)` point masses and their centres of gravity in the frame
       of their element (m).
     - `marker_at`: `(k, 3)` marker positions in the frame of their element (m).
     - `world`: `(6,)` pose of the robot's base in the measurement system's frame:
       translation (m) and roll, pitch, yaw (rad).
     - `gravity`: `(3,)` gravitational acceleration in the base frame, m/s².
-    - `joint_limits`: `(n, 2)` `[lo, hi]` of the active joints, rad.
+    - `joint_limits`: `(n, 2)` `[lo, hi]` of the active joints, rad (m if prismatic).
 
     **Topology (static)**: `names` and `parents` (index of the parent element, −1 for the
     base) of the elements in topological order, `coupling` (for each element, the
     `((active_index, coefficient), ...)` of its angle; empty for a fixed element),
     `joint_names` (the active joints, in the data's column order), `drive` (for each
     active joint, the element whose joint spring is its θ), `springs` (for each element,
-    whether it has its `(κθ, κα, κβ)` springs), `mass_element`, `marker_element`,
+    whether it has its `(κθ, κα, κβ)` springs), `prismatic` (for each element, whether it
+    slides; empty: none does), `geometric_errors` (how a calibration describes the
+    joints' geometric errors: `"dh"`, the DH rows' d, a, α, or `"origins"`, the six
+    numbers of each moving element's origin, as a URDF gives them), `mass_element`,
+    `marker_element`,
     `marker_names`. `laws`: the spring laws acting on joints (each with its own array
     parameters).
     """
@@ -104,6 +111,8 @@ class TreeRobot(eqx.Module):
     commanded: tuple[tuple[tuple[int, float], ...], ...] = eqx.field(static=True, default=())
     experiment: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=())
     lateral_before_joint: bool = eqx.field(static=True, default=False)
+    prismatic: tuple[bool, ...] = eqx.field(static=True, default=())
+    geometric_errors: str = eqx.field(static=True, default="dh")
     name: str = eqx.field(static=True, default="")
     description: str = eqx.field(static=True, default="")
     sources: tuple[str, ...] = eqx.field(static=True, default=())
@@ -129,6 +138,15 @@ class TreeRobot(eqx.Module):
         if len(self.parents) != e or len(self.coupling) != e or len(self.springs) != e:
             raise ValueError(
                 f"parents, coupling and springs must have {e} entries (one per element)"
+            )
+        if self.prismatic and len(self.prismatic) != e:
+            raise ValueError(f"prismatic must be empty or have {e} entries (one per element)")
+        for i, p in enumerate(self.prismatic):
+            if p and not self.coupling[i]:
+                raise ValueError(f"element {self.names[i]!r}: a prismatic element must move")
+        if self.geometric_errors not in ("dh", "origins"):
+            raise ValueError(
+                f"geometric_errors must be 'dh' or 'origins', got {self.geometric_errors!r}"
             )
         if self.commanded and len(self.commanded) != e:
             raise ValueError(f"commanded must be empty or have {e} entries (one per element)")
@@ -171,6 +189,17 @@ class TreeRobot(eqx.Module):
     def revolute(self) -> tuple[int, ...]:
         """Indices of the elements that move (active or coupled)."""
         return tuple(i for i, c in enumerate(self.coupling) if c)
+
+    @property
+    def sliding(self) -> tuple[bool, ...]:
+        """For each element, whether it is prismatic."""
+        return self.prismatic or (False,) * len(self.names)
+
+    @property
+    def joint_prismatic(self) -> tuple[bool, ...]:
+        """For each active joint, whether it slides (its drive element is prismatic):
+        its value is in m, not rad."""
+        return tuple(self.sliding[el] for el in self.drive)
 
     def coupling_matrix(self) -> np.ndarray:
         """`(e, n)`: element angles are `coupling_matrix() @ q` plus the springs'
@@ -221,6 +250,7 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "noise_std_mm",
         "spring_laws",
         "lateral_springs",
+        "geometric_errors",
         "experiment",
         "calibration",
     ),
@@ -235,9 +265,11 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "compliance_urad_per_Nm",
         "springs",
         "commanded_coupling",
+        "type",
+        "axial_compliance_um_per_N",
     ),
     "dh": ("d_m", "theta_deg", "a_m", "alpha_deg", "beta_deg"),
-    "joints": ("name", "limits_deg", "element"),
+    "joints": ("name", "limits_deg", "limits_m", "element"),
     "masses": ("element", "kg", "at_m"),
     "markers": ("name", "element", "at_m"),
     "world": ("xyz_m", "rpy_deg", "matrix"),
@@ -250,8 +282,10 @@ def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
     by SVD)."""
     U, _, Vt = np.linalg.svd(np.asarray(R, np.float64)[:3, :3])
     R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    pitch = math.asin(max(-1.0, min(1.0, -R[2, 0])))
-    if abs(math.cos(pitch)) < 1e-9:  # gimbal lock: put the whole turn into roll
+    # atan2, not asin: near pitch ±90° asin loses half the digits.
+    c = math.hypot(R[0, 0], R[1, 0])
+    pitch = math.atan2(-R[2, 0], c)
+    if c < 1e-12:  # gimbal lock: put the whole turn into roll
         return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
     return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
 
@@ -279,18 +313,15 @@ def tree_from_dict(d: dict) -> TreeRobot:
     joints = d.get("joints")
     if not isinstance(joints, list) or not joints:
         raise ValueError("robot file: 'joints' must be a non-empty list of active joints")
-    joint_names, limits = [], []
+    joint_names = []
     for i, j in enumerate(joints):
         check_keys(j, f"joints[{i}].", _KNOWN["joints"])
         joint_names.append(str(j.get("name", f"q{i + 1}")))
-        lim = np.radians(np.asarray(j.get("limits_deg", [-180.0, 180.0]), np.float64))
-        if lim.shape != (2,) or not lim[0] < lim[1]:
-            raise ValueError(f"robot file: joints[{i}].limits_deg must be [lo, hi] with lo < hi")
-        limits.append(lim)
     jindex = {n: i for i, n in enumerate(joint_names)}
 
     names: list[str] = []
     parents, couplings, origins, dhs, comps, springs = [], [], [], [], [], []
+    sliding: list[bool] = []
     commanded: list[tuple[tuple[int, float], ...]] = []
     for i, el in enumerate(d.get("elements", [])):
         where = f"elements[{i}]"
@@ -330,9 +361,33 @@ def tree_from_dict(d: dict) -> TreeRobot:
         if extra and not couplings[-1]:
             raise ValueError(f"robot file: {where}: commanded_coupling needs a coupling")
         commanded.append(tuple((jindex[j], float(k)) for j, k in extra.items()))
+        kind = el.get("type", "revolute")
+        if kind not in ("revolute", "prismatic"):
+            raise ValueError(
+                f"robot file: {where}.type must be 'revolute' or 'prismatic', got {kind!r}"
+            )
+        if kind == "prismatic" and not couplings[-1]:
+            raise ValueError(f"robot file: {where}: a prismatic element needs a coupling")
+        sliding.append(kind == "prismatic")
         c = np.asarray(el.get("compliance_urad_per_Nm", [0.0, 0.0, 0.0]), np.float64)
         if c.shape != (3,):
             raise ValueError(f"robot file: {where}.compliance_urad_per_Nm needs 3 numbers")
+        if "axial_compliance_um_per_N" in el:
+            if not sliding[-1]:
+                raise ValueError(
+                    f"robot file: {where}.axial_compliance_um_per_N: not a prismatic element"
+                )
+            if c[0] != 0:
+                raise ValueError(
+                    f"robot file: {where}: a prismatic element's axial spring is "
+                    "axial_compliance_um_per_N (compliance_urad_per_Nm[0] must be 0)"
+                )
+            c = np.array([float(el["axial_compliance_um_per_N"]), c[1], c[2]])
+        elif sliding[-1] and c[0] != 0:
+            raise ValueError(
+                f"robot file: {where}: a prismatic element's axial spring is "
+                "axial_compliance_um_per_N (compliance_urad_per_Nm[0] must be 0)"
+            )
         if not couplings[-1] and np.any(c != 0):
             raise ValueError(f"robot file: {where}: a fixed element has no spring")
         has = el.get("springs", list(_SPRINGS) if couplings[-1] else [])
@@ -369,6 +424,7 @@ def tree_from_dict(d: dict) -> TreeRobot:
                 f"robot file: element {names[el]!r} drives {joint_names[j]!r} and needs its "
                 "'theta' spring"
             )
+    limits = [_limits(j, f"joints[{i}]", sliding[drive[i]]) for i, j in enumerate(joints)]
     laws = d.get("spring_laws", [])
     if not isinstance(laws, list):
         raise ValueError("robot file: 'spring_laws' must be a list")
@@ -416,6 +472,8 @@ def tree_from_dict(d: dict) -> TreeRobot:
         commanded=tuple(commanded) if any(commanded) else (),
         experiment=_freeze(d.get("experiment", {})),
         lateral_before_joint=_lateral(d.get("lateral_springs", "after-joint")),
+        prismatic=tuple(sliding) if any(sliding) else (),
+        geometric_errors=_geometric(d.get("geometric_errors", "dh")),
         springs=tuple(springs),
         laws=tuple(
             spring_law_from_dict(x, f"spring_laws[{i}]", jindex) for i, x in enumerate(laws)
@@ -425,6 +483,28 @@ def tree_from_dict(d: dict) -> TreeRobot:
         sources=tuple(str(s) for s in d.get("sources", [])),
         noise_std=float(d.get("noise_std_mm", 1.0)) * 1e-3,
     )
+
+
+def _limits(j: dict, where: str, prismatic: bool) -> np.ndarray:
+    # `[lo, hi]` in SI: a revolute joint's in degrees (default ±180°), a prismatic one's
+    # in metres (required: a slide has no natural range).
+    key, wrong = ("limits_m", "limits_deg") if prismatic else ("limits_deg", "limits_m")
+    if wrong in j:
+        kind = "prismatic" if prismatic else "revolute"
+        raise ValueError(f"robot file: {where}.{wrong}: the joint is {kind}; give {key}")
+    if prismatic and key not in j:
+        raise ValueError(f"robot file: {where}: a prismatic joint needs limits_m")
+    lim = np.asarray(j.get(key, [-180.0, 180.0]), np.float64)
+    lim = lim if prismatic else np.radians(lim)
+    if lim.shape != (2,) or not lim[0] < lim[1]:
+        raise ValueError(f"robot file: {where}.{key} must be [lo, hi] with lo < hi")
+    return lim
+
+
+def _geometric(x: Any) -> str:
+    if x not in ("dh", "origins"):
+        raise ValueError(f"robot file: geometric_errors must be 'dh' or 'origins', got {x!r}")
+    return x
 
 
 def _lateral(x: Any) -> bool:
@@ -475,6 +555,10 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         if robot.coupling[i]:
             el["coupling"] = {robot.joint_names[j]: k for j, k in robot.coupling[i]}
             el["compliance_urad_per_Nm"] = _r(c[i] * 1e6, 9)
+            if robot.sliding[i]:
+                el["type"] = "prismatic"
+                el["axial_compliance_um_per_N"] = _r(c[i, :1] * 1e6, 9)[0]
+                el["compliance_urad_per_Nm"][0] = 0.0
             if robot.commanded and robot.commanded[i]:
                 el["commanded_coupling"] = {robot.joint_names[j]: k for j, k in robot.commanded[i]}
             if not all(robot.springs[i]):
@@ -490,7 +574,11 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         "joints": [
             {
                 "name": n,
-                "limits_deg": _r(np.degrees(lim), 9),
+                **(
+                    {"limits_m": _r(lim, 12)}
+                    if robot.joint_prismatic[j]
+                    else {"limits_deg": _r(np.degrees(lim), 9)}
+                ),
                 "element": robot.names[robot.drive[j]],
             }
             for j, (n, lim) in enumerate(
@@ -522,4 +610,5 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         "noise_std_mm": robot.noise_std * 1e3,
         **({"experiment": _thaw(robot.experiment)} if robot.experiment else {}),
         **({"lateral_springs": "before-joint"} if robot.lateral_before_joint else {}),
+        **({"geometric_errors": "origins"} if robot.geometric_errors == "origins" else {}),
     }

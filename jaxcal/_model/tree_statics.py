@@ -61,19 +61,21 @@ def pose_matrix(R: Float[Array, "3 3"], t: Float[Array, 3]) -> Float[Array, "4 4
     return jnp.concatenate([top, jnp.array([[0.0, 0.0, 0.0, 1.0]], R.dtype)], axis=0)
 
 
-def _element_transform(origin, dh, angle, phi, before: bool) -> tuple[Array, Array]:
+def _element_transform(origin, dh, angle, phi, slides, before: bool) -> tuple[Array, Array]:
     # `angle` holds the joint springs' share already (`spring_matrix`); `phi` the
     # element's lateral springs, turning with the link after the joint's motion or, with
-    # `before`, tilting the joint axis itself.
-    d, theta, a, alpha, beta = dh[0], dh[1], dh[2], dh[3], dh[4]
+    # `before`, tilting the joint axis itself. A sliding element (`slides` 1) moves
+    # along z by `angle` instead: Rz and Trans_z commute, so only d and θ trade places.
+    turn, slide = angle * (1.0 - slides), angle * slides
+    d, theta, a, alpha, beta = dh[0] + slide, dh[1], dh[2], dh[3], dh[4]
     Ro = rpy_matrix(origin[3:])
     Rab = _mm(_mm(Ro, Rx(alpha)), Ry(beta))
     lateral = _mm(Rx(phi[1]), Ry(phi[2]))
     if before:
         Rab = _mm(Rab, lateral)
-        R = _mm(Rab, Rz(theta + angle))
+        R = _mm(Rab, Rz(theta + turn))
     else:
-        R = _mm(_mm(Rab, Rz(theta + angle)), lateral)
+        R = _mm(_mm(Rab, Rz(theta + turn)), lateral)
     # Translation: the origin, then a along the x after Rx(α) (which Rx(α) leaves), then
     # d along the z of Rx(α)·Ry(β)·Rz(...) (which Rz leaves).
     t = origin[:3] + Ro[:, 0] * a + Rab[:, 2] * d
@@ -84,9 +86,9 @@ def element_poses(
     robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None = None
 ) -> tuple[Float[Array, "e 3 3"], Float[Array, "e 3"]]:
     """Rotation and position of every element's frame in the robot's base frame, for
-    commanded angles `q` (rad, the robot's active joints) and spring deflections `phi`
-    (rad, one row `(φz, φx, φy)` per moving element in `robot.revolute` order; default
-    zero)."""
+    commanded joint values `q` (rad; m for a prismatic joint) and spring deflections
+    `phi` (one row `(φz, φx, φy)` per moving element in `robot.revolute` order, rad; φz
+    in m for a prismatic element; default zero)."""
     e = len(robot.names)
     dtype = robot.dh.dtype
     angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q
@@ -103,12 +105,13 @@ def element_poses(
 
     def body(carry, x):
         Rs, ts = carry
-        i, parent, origin, dh, angle, spring = x
-        R, t = _element_transform(origin, dh, angle, spring, robot.lateral_before_joint)
+        i, parent, origin, dh, angle, spring, slides = x
+        R, t = _element_transform(origin, dh, angle, spring, slides, robot.lateral_before_joint)
         R, t = _mm(Rs[parent], R), ts[parent] + _mv(Rs[parent], t)
         return (Rs.at[i].set(R), ts.at[i].set(t)), None
 
-    xs = (jnp.arange(e), parents, robot.origin, robot.dh, angles, springs)
+    slides = jnp.asarray(robot.sliding, dtype)
+    xs = (jnp.arange(e), parents, robot.origin, robot.dh, angles, springs, slides)
     (Rs, ts), _ = jax.lax.scan(body, (R0, t0), xs)
     return Rs[:e], ts[:e]
 

@@ -10,7 +10,7 @@ URDF gives each link a frame; a joint places its child link's frame in its paren
 - the root link as a fixed element at the base frame (the tree's base frame is the root
   link's frame);
 - a fixed joint as a fixed element named after its child link, with the joint's origin;
-- a revolute or continuous joint as a moving element with the joint's origin whose DH
+- a revolute, continuous or prismatic joint as a moving element with the joint's origin whose DH
   row turns z onto the axis, `Rx(α) · Ry(β) · ez = axis` (`axis_angles`; both zero
   when the axis is z), followed, unless both are zero, by a fixed element
   `Ry(−β) · Rx(−α)` named after the child link: `Rx(α)Ry(β) · Rz(q) · Ry(−β)Rx(−α) =
@@ -27,8 +27,9 @@ URDF gives each link a frame; a joint places its child link's frame in its paren
   inertia tensors and the inertial frame's orientation are not used.
 
 The active joints are the movable joints that mimic no other, in the URDF's order.
-Prismatic, floating and planar joints are not in the model (it has no sliding motion
-yet) and raise `ValueError` naming the joint, unless the sidecar locks them. Meshes,
+A prismatic joint is a prismatic element (its `<limit>` in m, its axial spring's
+compliance `axial_compliance_um_per_N` in the sidecar). Floating and planar joints are
+not in the model and raise `ValueError` naming the joint, unless the sidecar locks them. Meshes,
 `package://` references, `<dynamics>`, `<transmission>` and the like are not read.
 
 What URDF cannot say comes from a **sidecar** dict (the keys of a tree robot file,
@@ -36,13 +37,20 @@ units in their names):
 
     {"name": "...", "description": "...", "sources": ["..."],
      "joints": {"<joint>": {"compliance_urad_per_Nm": [κθ, κα, κβ],
+                           "axial_compliance_um_per_N": κ (prismatic; then κθ = 0),
                            "springs": ["theta", "alpha", "beta"],
-                           "limits_deg": [lo, hi],
+                           "limits_deg": [lo, hi] | "limits_m": [lo, hi],
                            "locked_deg": 0.0 | "locked_m": 0.0}},
      "markers": [{"name": "tcp", "link": "<link>", "at_m": [x, y, z]}],
      "world": {"xyz_m": [...], "rpy_deg": [...]} | {"matrix": 4x4},
      "gravity_m_per_s2": [gx, gy, gz], "noise_std_mm": 0.05,
-     "spring_laws": [...], "experiment": {...}}
+     "spring_laws": [...], "experiment": {...},
+     "lateral_springs": "after-joint" | "before-joint",
+     "geometric_errors": "origins" | "dh"}
+
+A joint entry may also give `coupling` (joint name → coefficient) and
+`commanded_coupling`, as in a tree robot file: a coupling that URDF's `<mimic>` of a
+single joint cannot say (a parallelogram's passive joint follows two joints).
 
 `locked_deg` (revolute, continuous) or `locked_m` (prismatic) turns a joint into a fixed
 frame at that position (a gripper's fingers, say); a joint mimicking a locked joint is
@@ -69,7 +77,8 @@ from .tree import G, TreeRobot, tree_from_dict
 
 __all__ = ["tree_dict_from_urdf", "load_urdf"]
 
-_MOVING = ("revolute", "continuous")
+_MOVING = ("revolute", "continuous", "prismatic")
+_SPRING_KEYS = ("compliance_urad_per_Nm", "axial_compliance_um_per_N", "springs")
 _SIDECAR: dict[str, tuple[str, ...]] = {
     "": (
         "name",
@@ -82,8 +91,21 @@ _SIDECAR: dict[str, tuple[str, ...]] = {
         "noise_std_mm",
         "spring_laws",
         "experiment",
+        "lateral_springs",
+        "geometric_errors",
+        "calibration",
     ),
-    "joints": ("compliance_urad_per_Nm", "springs", "limits_deg", "locked_deg", "locked_m"),
+    "joints": (
+        "coupling",
+        "commanded_coupling",
+        "compliance_urad_per_Nm",
+        "axial_compliance_um_per_N",
+        "springs",
+        "limits_deg",
+        "limits_m",
+        "locked_deg",
+        "locked_m",
+    ),
     "markers": ("name", "link", "at_m"),
 }
 
@@ -182,7 +204,7 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
     `sidecar` holds what URDF cannot say (compliances, markers, the world frame, noise;
     see the module docstring). The defaults used for what neither gives are listed in
     the returned robot file's `description`. Every problem (not well-formed XML, a
-    missing or looping link, a mimic of an unknown joint, a prismatic joint, an unknown
+    missing or looping link, a mimic of an unknown joint, a planar joint, an unknown
     sidecar key) raises `ValueError` naming the element or key.
     """
     data, where = _read(path_or_text)
@@ -239,7 +261,7 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         kind = joint_of[name].type
         if "locked_m" in entry and kind != "prismatic":
             raise ValueError(f"URDF sidecar: joints.{name}.locked_m: {name!r} is {kind}")
-        if "locked_deg" in entry and kind not in _MOVING:
+        if "locked_deg" in entry and kind not in ("revolute", "continuous"):
             raise ValueError(f"URDF sidecar: joints.{name}.locked_deg: {name!r} is {kind}")
         if kind == "fixed":
             raise ValueError(f"URDF sidecar: joints.{name}: {name!r} is a fixed joint")
@@ -291,8 +313,13 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         if m[0] in ("active", "mimic") and j.type not in _MOVING:
             raise ValueError(
                 f"URDF {where}: joint {j.name!r} is {j.type}: jaxcal's robot model has "
-                f"revolute joints only (no {j.type} motion yet); lock it in the sidecar "
-                f"(joints.{j.name}.locked_m / locked_deg) to read the rest of the robot"
+                f"revolute and prismatic joints (no {j.type} motion); lock it in the "
+                f"sidecar (joints.{j.name}.locked_m / locked_deg) to read the rest"
+            )
+        if m[0] == "mimic" and (j.type == "prismatic") != (joint_of[m[1]].type == "prismatic"):
+            raise ValueError(
+                f"URDF {where}: joint {j.name!r} ({j.type}) mimics {m[1]!r} "
+                f"({joint_of[m[1]].type}): a mimic must move as its joint does"
             )
         motion[j.name] = m
         return m
@@ -304,10 +331,20 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         raise ValueError(f"URDF {where}: no movable joint (every joint is fixed or locked)")
     for name, entry in side_joints.items():
         moving = motion[name][0] in ("active", "mimic")
-        if not moving and any(k in entry for k in ("compliance_urad_per_Nm", "springs")):
+        if not moving and any(k in entry for k in (*_SPRING_KEYS, "coupling")):
             raise ValueError(f"URDF sidecar: joints.{name}: a locked joint has no spring")
-        if "limits_deg" in entry and motion[name][0] != "active":
-            raise ValueError(f"URDF sidecar: joints.{name}.limits_deg: not an active joint")
+        sliding = joint_of[name].type == "prismatic"
+        for key, ok in (("limits_deg", not sliding), ("limits_m", sliding)):
+            if key in entry and motion[name][0] != "active":
+                raise ValueError(f"URDF sidecar: joints.{name}.{key}: not an active joint")
+            if key in entry and not ok:
+                raise ValueError(
+                    f"URDF sidecar: joints.{name}.{key}: {name!r} is {joint_of[name].type}"
+                )
+        if "axial_compliance_um_per_N" in entry and not sliding:
+            raise ValueError(
+                f"URDF sidecar: joints.{name}.axial_compliance_um_per_N: {name!r} is not prismatic"
+            )
 
     # -- elements ---------------------------------------------------------------------
     defaults: list[str] = []
@@ -335,17 +372,26 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
             row["d_m"] = m[1]
         elif m[0] == "locked":
             row["theta_deg"] = math.degrees(m[1])
+        elif m[0] == "mimic" and j.type == "prismatic":
+            row["d_m"] = m[3]
         elif m[0] == "mimic":
             row["theta_deg"] = math.degrees(m[3])
         row = {k: v for k, v in row.items() if v != 0}
         if row:
             el["dh"] = row
         if m[0] in ("active", "mimic"):
-            el["coupling"] = {j.name: 1.0} if m[0] == "active" else {m[1]: m[2]}
             entry = side_joints.get(j.name, {})
+            el["coupling"] = {j.name: 1.0} if m[0] == "active" else {m[1]: m[2]}
+            for key in ("coupling", "commanded_coupling"):  # beyond what <mimic> says
+                if key in entry:
+                    el[key] = entry[key]
+            if j.type == "prismatic":
+                el["type"] = "prismatic"
             if "compliance_urad_per_Nm" in entry:
                 el["compliance_urad_per_Nm"] = [float(v) for v in entry["compliance_urad_per_Nm"]]
-            else:
+            if "axial_compliance_um_per_N" in entry:
+                el["axial_compliance_um_per_N"] = float(entry["axial_compliance_um_per_N"])
+            if not any(k in entry for k in _SPRING_KEYS):
                 no_compliance.append(j.name)
             if "springs" in entry:
                 el["springs"] = list(entry["springs"])
@@ -366,6 +412,15 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
     for name in active:
         j = joint_of[name]
         entry = side_joints.get(name, {})
+        if j.type == "prismatic":
+            joints.append(
+                {
+                    "name": name,
+                    "limits_m": _slide_limits(j, entry, where),
+                    "element": moving_element[name],
+                }
+            )
+            continue
         if "limits_deg" in entry:
             lim = [float(v) for v in entry["limits_deg"]]
         elif (
@@ -445,10 +500,26 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         "gravity_m_per_s2": side.get("gravity_m_per_s2", [0.0, 0.0, -G]),
         "noise_std_mm": float(side.get("noise_std_mm", 1.0)),
         "spring_laws": side.get("spring_laws", []),
+        "geometric_errors": side.get("geometric_errors", "origins"),
     }
-    if "experiment" in side:
-        out["experiment"] = side["experiment"]
+    for key in ("experiment", "lateral_springs", "calibration"):
+        if key in side:
+            out[key] = side[key]
     return out
+
+
+def _slide_limits(j, entry: dict, where: str) -> list[float]:
+    # A prismatic joint's `[lo, hi]` (m): the sidecar's, else the URDF's `<limit>`
+    # (which URDF requires of a prismatic joint).
+    if "limits_m" in entry:
+        return [float(v) for v in entry["limits_m"]]
+    lo, hi = (None, None) if j.limit is None else (j.limit.lower, j.limit.upper)
+    if lo is None or hi is None or not float(lo) < float(hi):
+        raise ValueError(
+            f"URDF {where}: prismatic joint {j.name!r} needs <limit lower upper> with "
+            "lower < upper (or limits_m in the sidecar)"
+        )
+    return [float(lo), float(hi)]
 
 
 def _unit_axis(j, where: str) -> np.ndarray:
