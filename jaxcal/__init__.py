@@ -188,10 +188,12 @@ from .compensation import (
 from .design import (
     CONSTRAINTS as CONSTRAINTS,
     PAPER_TABLE5_DEG as PAPER_TABLE5_DEG,
+    Advice as Advice,
     Design as Design,
     DesignBound as DesignBound,
     DesignCriteria as DesignCriteria,
     DesignProblem as DesignProblem,
+    advise_measurements as advise_measurements,
     constraint_values as constraint_values,
     design_bound as design_bound,
     design_bounds as design_bounds,

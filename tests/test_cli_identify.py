@@ -10,14 +10,17 @@ from jaxcal.internal.cli import main
 
 
 def test_identify_json(data_dir, capsys):
-    rc = main(["identify", str(data_dir / "example_calibration.csv"), "--json"])
+    args = ["identify", str(data_dir / "example_calibration.csv"), "--json", "--no-advice"]
+    rc = main(args)
     out = capsys.readouterr().out
     assert rc == 0
     d = json.loads(out)  # exactly one JSON object
     assert set(d) >= {"method", "parameters", "rms_mm", "chi2_red", "n_rows", "outliers"}
     assert d["method"] == "nonlinear" and d["n_rows"] == 48
-    names = ["k1_urad_per_Nm", "k6_urad_per_Nm", "Kc_N_per_m", "s0_m"]
-    assert all(n in d["parameters"] for n in names)
+    assert all(n in d["parameters"] for n in ["k1_urad_per_Nm", "k6_urad_per_Nm"])
+    # Kc (42 % relative std) is held at the robot file's value; held, s0 then has 21 %.
+    assert list(d["not_determined"]) == ["Kc_N_per_m", "s0_m"]
+    assert d["fixed"] == {"Kc_N_per_m": 900000.0, "s0_m": 0.5}
     assert set(d["parameters"]["k2_urad_per_Nm"]) == {"value", "std"}
     assert 0.01 < d["rms_mm"] < 0.03
 
@@ -70,9 +73,12 @@ def test_identify_vertical_then_fix(data_dir, tmp_path, capsys):
     fx, fy = header.index("fx_N"), header.index("fy_N")
     rows = [r for r in rows if float(r[fx]) == 0 and float(r[fy]) == 0]
     _write(tmp_path / "v.csv", header, rows)
-    assert main(["identify", str(tmp_path / "v.csv"), "--method", "linear"]) == 2
+    args = ["identify", str(tmp_path / "v.csv"), "--method", "linear", "--no-advice"]
+    assert main([*args, "--keep-undetermined"]) == 2
     err = capsys.readouterr().err
     assert "k1" in err and "--fix k1" in err
+    assert main(args) == 0  # by default: held and named
+    assert "k1 is not determined by these data" in capsys.readouterr().out
     rc = main(["identify", str(tmp_path / "v.csv"), "--method", "linear", "--fix", "k1", "--json"])
     cap = capsys.readouterr()
     assert rc == 0
@@ -91,7 +97,13 @@ def test_identify_unknown_fix_name(data_dir, capsys):
 def test_demo_json(capsys):
     assert main(["demo", "--json", "--seed", "1"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["n_rows"] == 36 and d["method"] == "nonlinear"
+    assert d["n_rows"] == 36 + d["advice"]["rows"] and d["method"] == "nonlinear"
+    # The Table 5 plan alone leaves the compensator undetermined; with the advised rows
+    # the default experiment determines every parameter it prints.
+    assert list(d["table5"]["not_determined"]) == ["Kc_N_per_m", "s0_m"]
+    assert d["not_determined"] == {} and len(d["parameters"]) == 8
+    for n, p in d["parameters"].items():
+        assert p["std"] <= 0.1 * p["value"], n
     z = [
         (d["parameters"][n]["value"] - d["true"][n]) / d["parameters"][n]["std"]
         for n in d["parameters"]

@@ -27,8 +27,13 @@ def register(sub) -> None:
             "standard errors and 95 % intervals from the stated noise (sigma_mm or the "
             "robot's noise). Methods: nonlinear (default; full equilibrium model, "
             "Levenberg-Marquardt), two-step (paper eqs. 20-22) and linear (eq. 3). "
-            "Parameters the data cannot determine are named; hold them at the robot's "
-            "values with --fix. Loads that are zero in every row are an error; rows that "
+            "A parameter whose relative std exceeds --max-relative-std (10 %), or that the "
+            "design cannot separate from the others, is not determined by these data: it "
+            "gets no two-sided interval (a one-sided 95 % bound where the data give one), "
+            "is held at the robot file's value in the estimates and the saved robot "
+            "(unless --keep-undetermined), and the measurements that would determine it "
+            "are computed and printed (poses in the robot's experiment box, rows, load). "
+            "Loads that are zero in every row are an error; rows that "
             "are exact copies of another row warn (they shrink the standard errors)."
         ),
     )
@@ -66,6 +71,25 @@ def register(sub) -> None:
     )
     add_overwrite_argument(p, "--save-robot")
     p.add_argument(
+        "--max-relative-std",
+        type=float,
+        default=0.1,
+        metavar="R",
+        help="a parameter whose std exceeds R times its estimate is not determined by "
+        "these data (default 0.1)",
+    )
+    p.add_argument(
+        "--keep-undetermined",
+        action="store_true",
+        help="keep the free estimate of a parameter the data do not determine (by default "
+        "it is held at the robot file's value in the estimates and the saved robot)",
+    )
+    p.add_argument(
+        "--no-advice",
+        action="store_true",
+        help="do not compute the measurements that would determine such a parameter",
+    )
+    p.add_argument(
         "--params",
         default=None,
         metavar="GROUPS",
@@ -95,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
         return identify_tree(args)
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
+    if not args.max_relative_std > 0:
+        raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)
@@ -107,9 +133,17 @@ def run(args: argparse.Namespace) -> int:
             fix=tuple(fix_names(args.fix)),
             robust=args.robust,
             keep_outliers=args.keep_outliers,
+            undetermined="free" if args.keep_undetermined else "hold",
+            threshold=args.max_relative_std,
         )
-    for w in caught:
-        print(f"jaxcal identify: warning: {w.message}", file=sys.stderr)
+    # A repeated fit (holding a parameter) repeats its warnings: each is said once.
+    said = list(dict.fromkeys(str(w.message) for w in caught))
+    for w in said:
+        print(f"jaxcal identify: warning: {w}", file=sys.stderr)
+    advice = None
+    if res.undetermined() and not args.no_advice:
+        print("computing the measurements that would determine them...", file=sys.stderr)
+        advice = advise(robot, data, res, tuple(fix_names(args.fix)))
     failed = not bool(res.converged)
     saved = unsaved = None
     if args.save_robot:
@@ -128,12 +162,16 @@ def run(args: argparse.Namespace) -> int:
             unsaved = e  # the results are still printed below
     if args.json:
         d = res.to_dict(args.outlier_threshold, data.ids)
-        d["warnings"] = [str(w.message) for w in caught]
+        d["warnings"] = said
+        if advice is not None:
+            d["advice"] = advice.to_dict()
         if saved:
             d["saved_robot"] = saved
         print_json(d)
         return _not_saved(unsaved) if unsaved else (1 if failed else 0)
     print(res.table())
+    if advice is not None:
+        print("\n".join(advice.lines()))
     rows = res.outliers(args.outlier_threshold)
     if rows:
         label = [data.ids[i] if data.ids and data.ids[i] else str(i + 1) for i in rows]
@@ -148,6 +186,28 @@ def run(args: argparse.Namespace) -> int:
         print("jaxcal identify: error: the fit did not converge", file=sys.stderr)
         return 1
     return 0
+
+
+def advise(robot, data, res, known: tuple[str, ...]):
+    """The measurements that would determine the parameters `res` leaves undetermined
+    (`jaxcal.design.advise_measurements`), linearised at the robot file's values with
+    the determined parameters at their estimates."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._parameters import get_parameters, set_parameters
+    from ..design import advise_measurements
+
+    names = robot.parameter_names
+    undetermined = res.undetermined()
+    p = np.asarray(get_parameters(robot), float).copy()
+    for n, v in zip(res.names, np.asarray(res.estimate), strict=True):
+        if n not in undetermined:
+            p[names.index(n)] = float(v)
+    at = set_parameters(robot, jnp.asarray(p))
+    out = set(res.gross_rows) if res.gross_excluded else set()
+    kept = data.subset([i for i in range(len(data)) if i not in out])
+    return advise_measurements(at, kept, tuple(undetermined), known=known, threshold=res.threshold)
 
 
 def _not_saved(error: OSError) -> int:

@@ -30,7 +30,7 @@ from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
 from .method import METHODS, fit_jit, method_named
 from .methods import linear_columns
-from .result import IdentificationResult, resolve_name
+from .result import THRESHOLD, IdentificationResult, resolve_name
 
 __all__ = [
     "identify",
@@ -171,6 +171,8 @@ def identify(
     screen_gross: bool = True,
     keep_outliers: bool = False,
     throw: bool = False,
+    undetermined: str = "free",
+    threshold: float = THRESHOLD,
 ) -> IdentificationResult:
     """Identify the elastostatic parameters of `robot` from measured `data`.
 
@@ -186,6 +188,15 @@ def identify(
       w-statistic against a Bonferroni critical value, 0.1 % false alarms per data set)
       and, unless `keep_outliers`, exclude them from the estimates. Named in
       `result.gross_errors()`; a warning says so.
+    - `undetermined`: what becomes of a parameter *not determined by these data*
+      (relative std above `threshold`, default 10 %, or in the null space of the
+      design). `"free"` (default): it keeps its estimate, flagged in
+      `result.not_determined` (reports give it no two-sided interval). `"hold"` (what
+      the command line does): the fit is repeated with it held at the robot file's value,
+      so that a saved robot file or a compensation uses that value; a parameter the
+      design cannot determine at all is held instead of raising. Either way
+      `result.free_values` keeps its free estimate and std, and `result.bound95` its
+      one-sided bound. The two-step method cannot hold k2, Kc or s0: they stay flagged.
 
     Raises `ValueError` for float64 off, missing deflections, non-finite values, joint
     angles outside the limits, and parameters the data cannot determine (named, with
@@ -195,6 +206,10 @@ def identify(
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if undetermined not in ("free", "hold"):
+        raise ValueError(f"undetermined must be 'free' or 'hold', got {undetermined!r}")
+    if not threshold > 0:
+        raise ValueError(f"threshold must be positive, got {threshold}")
     if robust and method != "nonlinear":
         raise ValueError("robust (Huber) fitting is available for the nonlinear method only")
     check_inputs(robot, data)
@@ -218,6 +233,11 @@ def identify(
         n_q2 = len(q2_groups(data.q[:, 1])[0])
         if n_q2 < 3:
             bad, suggest = ["Kc_N_per_m", "s0_m"], []
+    user_fixed = fixed
+    if bad and undetermined == "hold" and suggest and _holdable(method, suggest):
+        # Not determined at all: held like the rest of the undetermined (flagged below).
+        fixed = (*fixed, *suggest)
+        bad = []
     if bad:
         flags = " ".join("--fix " + s.split("_")[0] for s in suggest)
         short = lambda ns: ", ".join(n.split("_")[0] for n in ns)
@@ -233,26 +253,50 @@ def identify(
             f"{_reasons(robot, data, bad)}{hint}"
         )
     p0 = np.asarray(get_parameters(robot))
-    for n in fixed:
+    for n in user_fixed:
         warnings.warn(
             f"{n} is fixed at the robot's value {p0[names.index(n)]:g}; its uncertainty is "
             "not included in the others' standard errors",
             stacklevel=2,
         )
-    free = tuple(n not in fixed for n in names)
 
-    settings: dict = {"free": free}
-    if method == "nonlinear":
-        loss = "huber" if robust else "l2"
-        settings.update(loss=loss, huber_delta=float(huber_delta), max_steps=int(max_steps))
-    solver = method_named(method, **settings)
+    def run(fixed: tuple[str, ...]) -> IdentificationResult:
+        settings: dict = {"free": tuple(n not in fixed for n in names)}
+        if method == "nonlinear":
+            loss = "huber" if robust else "l2"
+            settings.update(loss=loss, huber_delta=float(huber_delta), max_steps=int(max_steps))
+        solver = method_named(method, **settings)
 
-    def fit(d: Dataset) -> IdentificationResult:
-        return _fit_stored(solver, solver.init(robot, d), d.deflection)
+        def fit(d: Dataset) -> IdentificationResult:
+            return _fit_stored(solver, solver.init(robot, d), d.deflection)
 
-    res = fit(data)
-    if screen_gross:
-        res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
+        res = fit(data)
+        if screen_gross:
+            keep = [i for i, n in enumerate(cols) if n not in fixed]
+            res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
+        return res
+
+    structural = [n for n in fixed if n not in user_fixed]
+    free_values = {n: (float("nan"), float("inf")) for n in structural}
+    res = run(fixed)
+    # Parameters above the threshold: flagged, or held and the fit repeated (holding one
+    # can leave another above it, hence the loop; each pass holds at least one more).
+    while True:
+        rel = res.relative_std()
+        over = [n for n, r in zip(res.names, rel, strict=True) if r > threshold]
+        for n in over:
+            free_values.setdefault(n, res.parameter(n))
+        if undetermined == "free" or not over or not _holdable(method, over):
+            break
+        fixed = (*fixed, *over)
+        res = run(fixed)
+    flagged = tuple(n for n in names if n in free_values)
+    res = dataclasses.replace(
+        res,
+        threshold=float(threshold),
+        not_determined=flagged,
+        free_values=tuple(free_values[n] for n in flagged),
+    )
     if not bool(res.converged):
         why = messages(res.result)[0] or "it did not converge"
         text = f"the {method} fit failed: {why}; the estimates are not reliable"
@@ -260,8 +304,16 @@ def identify(
             raise RuntimeError(text)
         warnings.warn(text, stacklevel=2)
     for msg in plausibility(robot, res):
-        warnings.warn(msg, stacklevel=2)
+        # An estimate the data do not determine says nothing about units.
+        if not any(msg.startswith(n.split("_")[0] + " ") for n in flagged):
+            warnings.warn(msg, stacklevel=2)
     return res
+
+
+def _holdable(method: str, names) -> bool:
+    # The two-step method estimates k2, Kc and s0 together from the aggregated
+    # compliances: it cannot hold any of them.
+    return method != "two-step" or not {"k2_urad_per_Nm", "Kc_N_per_m", "s0_m"} & set(names)
 
 
 def _screen_gross(res, data, design, fit, *, exclude: bool):

@@ -19,9 +19,21 @@ from .._parameters import parameter_units
 from .._robot import Robot
 from .._solution import RESULTS, messages, result_of
 
-__all__ = ["IdentificationResult", "Z95", "free_mask", "make_result", "resolve_name"]
+__all__ = [
+    "IdentificationResult",
+    "THRESHOLD",
+    "Z95",
+    "free_mask",
+    "make_result",
+    "resolve_name",
+]
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+Z95_ONE_SIDED = 1.6448536269514722  # one-sided 95 % normal quantile
+
+#: A parameter whose relative standard deviation exceeds this is *not determined by
+#: these data*: no two-sided interval is reported for it.
+THRESHOLD = 0.1
 
 
 class IdentificationResult(eqx.Module):
@@ -44,6 +56,15 @@ class IdentificationResult(eqx.Module):
     rows only), `fixed` (names of parameters held at the robot's value), `gross_rows`
     (0-based rows named as gross errors, see `jaxcal._identification.gross`) and `gross_excluded`
     (whether the estimates exclude them).
+
+    Parameters *not determined by these data* (relative std above `threshold`, or in
+    the null space of the design) are named in `not_determined`, with the estimate and
+    std of the fit in which they were free in `free_values` (`(nan, inf)` when no fit
+    could free them). Those also in `fixed` are *held* at the robot file's value, so
+    that every derived result (a saved robot file, a compensation) uses that value;
+    the others keep their free estimate (the caller asked so). Reports give them no
+    two-sided interval, only a one-sided 95 % upper bound where the data give one
+    (`bound95`).
     """
 
     estimate: Float[Array, " p"]
@@ -63,6 +84,9 @@ class IdentificationResult(eqx.Module):
     fixed: tuple[str, ...] = eqx.field(static=True, default=())
     gross_rows: tuple[int, ...] = eqx.field(static=True, default=())
     gross_excluded: bool = eqx.field(static=True, default=False)
+    threshold: float = eqx.field(static=True, default=THRESHOLD)
+    not_determined: tuple[str, ...] = eqx.field(static=True, default=())
+    free_values: tuple[tuple[float, float], ...] = eqx.field(static=True, default=())
 
     @property
     def converged(self) -> Bool[Array, ""]:
@@ -104,15 +128,51 @@ class IdentificationResult(eqx.Module):
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             r = Z95 * std / est
             log = np.stack([est * np.exp(-r), est * np.exp(r)], axis=-1)
-        return np.where((est > 0)[:, None] & np.isfinite(log), log, wald)
+        out = np.where((est > 0)[:, None] & np.isfinite(log), log, wald)
+        # No two-sided interval for a parameter the data do not determine.
+        out[np.isin(np.asarray(self.names), self.undetermined())] = np.nan
+        return out
 
-    def undetermined(self, limit: float = 0.5) -> list[str]:
-        """Names of parameters the data leave effectively undetermined: relative
-        standard error above `limit` (50 %)."""
+    def relative_std(self) -> np.ndarray:
+        """Host-side `std / |estimate|` of the fitted parameters (`inf` where the std is
+        not finite)."""
         est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
         with np.errstate(divide="ignore", invalid="ignore"):
             rel = std / np.abs(est)
-        return [n for n, r in zip(self.names, rel, strict=True) if not r <= limit]
+        return np.where(np.isfinite(rel), rel, np.inf)
+
+    def undetermined(self, limit: float | None = None) -> list[str]:
+        """Names of the parameters not determined by these data: those flagged in
+        `not_determined`, and fitted ones whose relative std exceeds `limit` (default
+        `threshold`, 10 %). In the robot's parameter order as far as known."""
+        limit = self.threshold if limit is None else limit
+        rel = self.relative_std()
+        out = list(self.not_determined)
+        out += [n for n, r in zip(self.names, rel, strict=True) if r > limit and n not in out]
+        return out
+
+    def held(self) -> tuple[str, ...]:
+        """The parameters not determined by these data and held at the robot file's
+        value (so in `fixed`)."""
+        return tuple(n for n in self.not_determined if n in self.fixed)
+
+    def free_value(self, name: str) -> tuple[float, float]:
+        """`(estimate, std)` of a parameter in the fit where it was free: the flagged
+        fit's numbers for a parameter in `not_determined`, else `parameter(name)`."""
+        full = resolve_name(name, (*self.names, *self.fixed))
+        if full in self.not_determined and self.free_values:
+            v, s = self.free_values[self.not_determined.index(full)]
+            return float(v), float(s)
+        return self.parameter(full)
+
+    def bound95(self, name: str) -> float | None:
+        """One-sided 95 % upper bound `estimate + 1.645 std` of a parameter from the fit
+        where it was free, or `None` where the data give none (a std that is not
+        finite: the parameter is in the null space of the design). A positive parameter
+        has the lower bound 0 whatever the data."""
+        v, s = self.free_value(name)
+        bound = v + Z95_ONE_SIDED * s
+        return bound if np.isfinite(bound) and bound > 0 else None
 
     def parameter(self, name: str) -> tuple[float, float]:
         """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""
@@ -136,12 +196,15 @@ class IdentificationResult(eqx.Module):
             "chi2_red": float(self.chi2_red),
             "n_rows": int(self.residuals.shape[0]),
             "outliers": [ids[i] if ids and ids[i] else i + 1 for i in rows],
-            # Log-parameter intervals (positive parameters), see `intervals95`.
+            # Log-parameter intervals (positive parameters), see `intervals95`; none
+            # for a parameter the data do not determine.
             "ci95": {
-                n: [float(c[0]), float(c[1])]
+                n: [float(c[0]), float(c[1])] if np.all(np.isfinite(c)) else None
                 for n, c in zip(self.names, self.intervals95(), strict=True)
             },
             "undetermined": self.undetermined(),
+            "not_determined": self.not_determined_dict(),
+            "threshold": self.threshold,
             "gross_errors": [
                 {"row": ids[i] if ids and ids[i] else i + 1, "sigma": z}
                 for i, z in self.gross_errors()
@@ -157,6 +220,56 @@ class IdentificationResult(eqx.Module):
             d["result"] = messages(self.result)[0]
         return d
 
+    def not_determined_dict(self) -> dict[str, dict]:
+        """Per parameter not determined by these data: the free fit's estimate, std and
+        relative std, the one-sided 95 % upper bound (`None`: the data give none), and
+        the value it is held at (`None`: not held). JSON-ready (no NaN)."""
+        fixed = dict(zip(self.fixed, np.asarray(self.fixed_values).tolist(), strict=True))
+        out = {}
+        for n in self.undetermined():
+            v, s = self.free_value(n)
+            fin = lambda x: float(x) if np.isfinite(x) else None
+            out[n] = {
+                "estimate": fin(v),
+                "std": fin(s),
+                "relative_std": fin(s / abs(v)) if v else None,
+                "upper_bound95": self.bound95(n),
+                "held_at": fixed.get(n),
+            }
+        return out
+
+    def not_determined_lines(self) -> list[str]:
+        """One sentence per parameter not determined by these data, as the tables print
+        them."""
+        lines = []
+        fixed = dict(zip(self.fixed, np.asarray(self.fixed_values).tolist(), strict=True))
+        limit = f"{100 * self.threshold:g} %"
+        for n in self.undetermined():
+            short, unit = n.split("_")[0], parameter_units(n)
+            v, s = self.free_value(n)
+            rel = s / abs(v) if v else np.inf
+            why = (
+                f"relative std {100 * rel:.0f} % > {limit}"
+                if np.isfinite(rel)
+                else "the design cannot separate it from the other parameters"
+            )
+            b = self.bound95(n)
+            bound = (
+                f"; the data bound it above: {short} ≤ {b:.4g} {unit} (95 %, one-sided)"
+                if b is not None
+                else "; the data give no bound"
+            )
+            if n in fixed:
+                use = (
+                    f"held at the robot file's value {fixed[n]:.6g} {unit} in the estimates "
+                    "above, the saved robot and compensation (the others' std leave out its "
+                    "uncertainty)"
+                )
+            else:
+                use = "its estimate is kept as asked, but has no interval"
+            lines.append(f"{short} is not determined by these data ({why}): {use}{bound}.")
+        return lines
+
     def table(self, truth: dict[str, float] | None = None) -> str:
         """A readable table: parameter, estimate, std, 95 % interval, unit (and the true
         value and the error in std units when `truth` maps names to values)."""
@@ -165,16 +278,25 @@ class IdentificationResult(eqx.Module):
             headers += ["true", "error/std"]
         rows = []
         ci = self.intervals95()
+        undetermined = self.undetermined()
         for i, n in enumerate(self.names):
             v, s = float(self.estimate[i]), float(self.std[i])
             lo, hi = (float(x) for x in ci[i])
             row: list[object] = [n.split("_")[0], v, s, lo, hi, parameter_units(n)]
+            if n in undetermined:
+                b = self.bound95(n)
+                row = [n.split("_")[0] + " (not determined)", v, s, "-"]
+                row += ["≤ " + f"{b:.6g}" if b is not None else "-", parameter_units(n)]
             if truth is not None:
                 t = truth.get(n, float("nan"))
                 row += [t, (v - t) / s if s > 0 else float("nan")]
             rows.append(row)
         for n, v in zip(self.fixed, np.asarray(self.fixed_values), strict=True):
-            row = [n.split("_")[0] + " (fixed)", float(v), "-", "-", "-", parameter_units(n)]
+            tag, hi = " (fixed)", "-"
+            if n in undetermined:
+                b = self.bound95(n)
+                tag, hi = " (not determined, held)", "≤ " + f"{b:.6g}" if b is not None else "-"
+            row = [n.split("_")[0] + tag, float(v), "-", "-", hi, parameter_units(n)]
             if truth is not None:
                 row += [truth.get(n, float("nan")), "-"]
             rows.append(row)
@@ -185,13 +307,7 @@ class IdentificationResult(eqx.Module):
             f"(dof {self.dof})" + ("" if bool(self.converged) else "  [NOT CONVERGED]")
         )
         lines.append("95% intervals from the log-parameter (the parameters are positive).")
-        for n in self.undetermined():
-            v, s = self.parameter(n)
-            rel = f" (relative std {100 * s / abs(v):.0f} % > 50 %)" if v else ""
-            lines.append(
-                f"{n.split('_')[0]} is effectively undetermined by these data{rel}: hold it "
-                "with --fix, or measure at more q2 levels"
-            )
+        lines += self.not_determined_lines()
         return "\n".join(lines)
 
 

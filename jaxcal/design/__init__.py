@@ -2,8 +2,13 @@
 parameters most precise. Constraints and loads, the covariance criteria (trace,
 determinant, weighted, explicit parameter lists) with autodiff gradients, the continuous
 constrained optimiser, the approximate-design bound and efficiency, and discrete plans
-(random, structured, the paper's Table 5)."""
+(random, structured, the paper's Table 5); advice for parameters a data set does
+not determine (which further rows, where, how many)."""
 
+from ._advice import (
+    Advice as Advice,
+    advise_measurements as advise_measurements,
+)
 from ._bound import (
     DesignBound as DesignBound,
     design_bound as design_bound,
