@@ -2,10 +2,10 @@
 system's frame (a laser tracker's, a camera system's), one robot pose a row.
 
 Columns (units in the names): `q1_deg … qN_deg`, the robot file's N active joints in its
-order; for each marker `M` named in the robot file, `M_x_mm, M_y_mm, M_z_mm`; optional
-`sigma_mm` (each coordinate's standard deviation, default the robot file's
-`noise_std_mm`) and `id`. An empty marker (all three cells empty) was not seen in that
-row. There are no load columns: the robot carries its own weight only.
+order (`qI_mm` for a prismatic joint); for each marker `M` named in the robot file,
+`M_x_mm, M_y_mm, M_z_mm`; optional `sigma_mm` (each coordinate's standard deviation,
+default the robot file's `noise_std_mm`) and `id`. An empty marker (all three cells
+empty) was not seen in that row. There are no load columns: the robot carries its own weight only.
 
 Inside, `MarkerData` is SI (rad, m); unseen markers are NaN with `seen` false.
 """
@@ -66,7 +66,10 @@ class MarkerData(eqx.Module):
 
 def marker_columns(robot: TreeRobot) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The joint columns and the marker columns a file for `robot` has."""
-    q = tuple(f"q{i}_deg" for i in range(1, robot.n_joints + 1))
+    q = tuple(
+        f"q{i}_{'mm' if slides else 'deg'}"
+        for i, slides in enumerate(robot.joint_prismatic, start=1)
+    )
     m = tuple(f"{k}_{a}_mm" for k in robot.marker_names for a in "xyz")
     return q, m
 
@@ -86,7 +89,7 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     if unknown:
         raise DataError(
             f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; robot "
-            f"{robot.name!r} has joints q1_deg..q{robot.n_joints}_deg and markers "
+            f"{robot.name!r} has joints {', '.join(qcols)} and markers "
             f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm)"
         )
     missing = [c for c in qcols if c not in header]
@@ -111,7 +114,9 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     y = np.full((n, k, 3), np.nan)
     sigma = np.full(n, robot.noise_std)
     ids: list[str] = []
-    limits = np.degrees(np.asarray(robot.joint_limits))
+    # File units per SI unit of each joint: deg per rad, or mm per m for a slide.
+    unit = np.array([1e3 if s else np.degrees(1.0) for s in robot.joint_prismatic])
+    limits = np.asarray(robot.joint_limits) * unit[:, None]
     problems: list[str] = []
     for r, (line, row) in enumerate(body):
         where = f"{path}, row {r + 1} (line {line})"
@@ -124,11 +129,11 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
                 problems.append(f"{where}, column {c}: {row[col[c]]!r} is not a finite number")
             elif not limits[i, 0] - 1e-9 <= v <= limits[i, 1] + 1e-9:
                 problems.append(
-                    f"{where}, column {c}: {v:g} deg is outside the joint limits "
+                    f"{where}, column {c}: {v:g} {c.rsplit('_', 1)[1]} is outside the joint limits "
                     f"[{limits[i, 0]:g}, {limits[i, 1]:g}] of {robot.joint_names[i]}"
                 )
             else:
-                q[r, i] = np.radians(v)
+                q[r, i] = v / unit[i]
         for m in present:
             j = robot.marker_names.index(m)
             cells = [row[col[f"{m}_{a}_mm"]].strip() for a in "xyz"]
@@ -181,7 +186,8 @@ def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot,
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["id", *qcols, *mcols, "sigma_mm"])
         for r in range(len(data)):
-            cells = [f"{v:.12g}" for v in np.degrees(np.asarray(data.q[r]))]
+            unit = [1e3 if s else np.degrees(1.0) for s in robot.joint_prismatic]
+            cells = [f"{v * u:.12g}" for v, u in zip(np.asarray(data.q[r]), unit, strict=True)]
             cells += ["" if not np.isfinite(v) else f"{v:.6f}" for v in y[r].ravel()]
             label = data.ids[r] if data.ids else str(r + 1)
             w.writerow([label, *cells, f"{float(data.sigma[r]) * 1e3:g}"])

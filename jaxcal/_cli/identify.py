@@ -64,9 +64,11 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--save-robot",
-        metavar="CALIBRATED.json",
+        metavar="CALIBRATED.json|.urdf",
         help="write the robot file with the identified parameters and a 'calibration' block "
         "(method, date, data file and hash, std, covariance, chi2); load it with --robot. "
+        "A tree robot may be saved as CALIBRATED.urdf (the calibrated kinematics) with its "
+        "sidecar CALIBRATED.json beside it. "
         "Refused if it is the data or the --robot file, unless --overwrite-input",
     )
     add_overwrite_argument(p, "--save-robot")
@@ -117,6 +119,12 @@ def run(args: argparse.Namespace) -> int:
         from .validate import identify_tree
 
         return identify_tree(args)
+    if args.save_robot and args.save_robot.lower().endswith(".urdf"):
+        raise ValueError(
+            f"--save-robot {args.save_robot}: a deflection calibration is saved as a robot "
+            "file (.json); write it as URDF with: jaxcal export --robot CALIBRATED.json -o "
+            f"{args.save_robot}"
+        )
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
     if not args.max_relative_std > 0:

@@ -37,6 +37,7 @@ COMMANDS = (
     "design",
     "discover",
     "compensate",
+    "export",
     "cache",
 )
 

@@ -36,7 +36,8 @@ def register(sub) -> None:
         help="calibrate on part of an absolute-measurement file, report held-out errors",
         description=(
             "Hold out --test rows (drawn by --seed), calibrate the robot on the others "
-            "adding the parameter groups in turn (" + ", ".join(DEFAULT_GROUPS) + "), and "
+            "adding the parameter groups in turn (" + ", ".join(DEFAULT_GROUPS) + "; for a "
+            "URDF robot origins in place of dh), and "
             "print the mean, std and max 3-D marker error (mm) on the held-out rows after "
             "each; with --folds K, K disjoint test sets instead. For Agile Justin the published "
             "figures are printed beside."
@@ -59,7 +60,7 @@ def register(sub) -> None:
         + ",".join(GROUPS)
         + " (default "
         + ",".join(DEFAULT_GROUPS)
-        + ")",
+        + "; origins in place of dh for a URDF robot)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -78,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.elastogeometric import split_rows, validate_tree
     from .._identification.parameter_groups import parse_groups
 
-    groups = parse_groups(args.params)
     robot, data = _load(args)
+    groups = parse_groups(args.params, robot)
     n = len(data)
     if args.folds is not None:
         if not 2 <= args.folds <= n:
@@ -169,10 +170,14 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._identification.parameter_groups import parse_groups
     from .._io import atomic_file
     from .._model.tree import tree_to_dict
+    from .._model.urdf_export import save_urdf
 
     check_output_path(args.save_robot, "--save-robot")
-    groups = parse_groups(getattr(args, "params", None))
+    urdf_out = args.save_robot is not None and args.save_robot.lower().endswith(".urdf")
+    if urdf_out:  # its sidecar robot file is written beside it
+        check_output_path(args.save_robot[:-5] + ".json", "--save-robot (its sidecar)")
     robot, data = _load(args)
+    groups = parse_groups(getattr(args, "params", None), robot)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
     cal = calibrate_tree(robot, data, groups, hold=tuple(fix_names(args.fix)))
     params = []
@@ -189,8 +194,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             )
     saved = None
     if args.save_robot and cal.converged:
-        d = tree_to_dict(cal.robot)
-        d["calibration"] = {
+        calibration = {
             "date": datetime.date.today().isoformat(),
             "data": str(args.data),
             "rows": len(data),
@@ -199,9 +203,12 @@ def identify_tree(args: argparse.Namespace) -> int:
             "parameters": params,
             "held": list(cal.held),
         }
-        with atomic_file(args.save_robot) as fh:
-            json.dump(d, fh, indent=1, ensure_ascii=False)
-        saved = args.save_robot
+        if urdf_out:
+            saved = str(save_urdf(cal.robot, args.save_robot, calibration=calibration)[1])
+        else:
+            with atomic_file(args.save_robot) as fh:
+                json.dump({**tree_to_dict(cal.robot), "calibration": calibration}, fh, indent=1)
+            saved = args.save_robot
     summary = {
         "robot": robot.name,
         "data": args.data,
@@ -234,7 +241,12 @@ def identify_tree(args: argparse.Namespace) -> int:
             f"RMS 3-D marker error {cal.rms_mm:.3f} mm over {len(data)} rows; "
             f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"
         )
-        if saved:
+        if saved and urdf_out:
+            print(
+                f"calibrated robot written to {args.save_robot} (URDF) and its sidecar {saved} "
+                f"(use it with --robot {saved})"
+            )
+        elif saved:
             print(f"calibrated robot written to {saved} (use it with --robot {saved})")
     if not cal.converged:
         print(f"jaxcal identify: error: {cal.message}", file=sys.stderr)

@@ -532,8 +532,10 @@ def _thaw(x: Any) -> Any:
     return x
 
 
-def _r(x, nd: int = 12) -> list[float]:
-    return [round(float(v), nd) for v in np.asarray(x).ravel()]
+def _r(x) -> list[float]:
+    # Every digit (JSON writes the shortest text that reads back to the same double): a
+    # saved calibrated robot predicts what the calibrated model did, to round-off.
+    return [float(v) for v in np.asarray(x).ravel()]
 
 
 def tree_to_dict(robot: TreeRobot) -> dict:
@@ -549,15 +551,15 @@ def tree_to_dict(robot: TreeRobot) -> dict:
             el["origin_rpy_deg"] = _r(np.degrees(o[i, 3:]))
         keys = ("d_m", "theta_deg", "a_m", "alpha_deg", "beta_deg")
         vals = [dh[i, 0], math.degrees(dh[i, 1]), dh[i, 2], *np.degrees(dh[i, 3:])]
-        row = {k: round(float(v), 12) for k, v in zip(keys, vals, strict=True) if v != 0}
+        row = {k: float(v) for k, v in zip(keys, vals, strict=True) if v != 0}
         if row:
             el["dh"] = row
         if robot.coupling[i]:
             el["coupling"] = {robot.joint_names[j]: k for j, k in robot.coupling[i]}
-            el["compliance_urad_per_Nm"] = _r(c[i] * 1e6, 9)
+            el["compliance_urad_per_Nm"] = _r(c[i] * 1e6)
             if robot.sliding[i]:
                 el["type"] = "prismatic"
-                el["axial_compliance_um_per_N"] = _r(c[i, :1] * 1e6, 9)[0]
+                el["axial_compliance_um_per_N"] = _r(c[i, :1] * 1e6)[0]
                 el["compliance_urad_per_Nm"][0] = 0.0
             if robot.commanded and robot.commanded[i]:
                 el["commanded_coupling"] = {robot.joint_names[j]: k for j, k in robot.commanded[i]}
@@ -575,9 +577,9 @@ def tree_to_dict(robot: TreeRobot) -> dict:
             {
                 "name": n,
                 **(
-                    {"limits_m": _r(lim, 12)}
+                    {"limits_m": _r(lim)}
                     if robot.joint_prismatic[j]
-                    else {"limits_deg": _r(np.degrees(lim), 9)}
+                    else {"limits_deg": _r(np.degrees(lim))}
                 ),
                 "element": robot.names[robot.drive[j]],
             }
