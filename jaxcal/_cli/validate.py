@@ -173,9 +173,10 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._model.urdf_export import save_urdf
 
     check_output_path(args.save_robot, "--save-robot")
-    urdf_out = args.save_robot is not None and args.save_robot.lower().endswith(".urdf")
-    if urdf_out:  # its sidecar robot file is written beside it
-        check_output_path(args.save_robot[:-5] + ".json", "--save-robot (its sidecar)")
+    save: str | None = args.save_robot
+    urdf_out = save is not None and save.lower().endswith(".urdf")
+    if save is not None and urdf_out:  # its sidecar robot file is written beside it
+        check_output_path(save[:-5] + ".json", "--save-robot (its sidecar)")
     robot, data = _load(args)
     groups = parse_groups(getattr(args, "params", None), robot)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
