@@ -10,18 +10,20 @@ from __future__ import annotations
 import contextlib
 import csv
 import math
-import os
-import stat
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._output import (
+    OutputError as OutputError,
+    atomic_file as atomic_file,
+    save_figure as save_figure,
+)
+from ._ranges import ABSURD_LOAD_FACTOR, plausible_scales
 from ._robot import Robot
 
 __all__ = [
@@ -217,6 +219,32 @@ def read_rows(path: str | Path) -> list[list[str]]:
     return rows
 
 
+def _implausible_cells(
+    robot: Robot, numeric: list[str], values: np.ndarray, path: Path, line_of: list[int]
+) -> list[str]:
+    """The cells that no measurement of `robot` can hold (`plausible_scales`): a
+    deflection or a noise larger than the robot itself, a load of more than
+    `ABSURD_LOAD_FACTOR` times its weight or rated load, a moment of that load at
+    its size. One problem per cell, in row order (`line_of[r]`: row r's line)."""
+    size, load = plausible_scales(robot)
+    weight = f"{ABSURD_LOAD_FACTOR:g}x the robot's own weight or rated load"
+    bound = {c: (load, "N", f"load (over {load:.3g} N, {weight})") for c in F_COLS}
+    moment = f"moment (over {load * size:.3g} N·m, that load at the robot's size)"
+    bound |= {c: (load * size, "N·m", moment) for c in M_COLS}
+    size_mm = f"larger than the robot itself ({size * 1e3:.4g} mm); in mm (not µm)?"
+    bound |= {c: (size * 1e3, "mm", f"deflection: {size_mm}") for c in D_COLS}
+    bound["sigma_mm"] = (size * 1e3, "mm", f"noise: {size_mm}")
+    found = []
+    for j, c in enumerate(numeric):
+        if c in bound:
+            limit, unit, what = bound[c]
+            for r in np.flatnonzero(np.abs(values[:, j]) > limit):
+                cell = f"{path}, row {r + 1} (line {line_of[r]}), column {c}"
+                text = f"{cell}: {values[r, j]:g} {unit} is not a plausible {what}"
+                found.append((int(r), j, text))
+    return [text for _, _, text in sorted(found)]
+
+
 def read_dataset(
     path: str | Path,
     robot: Robot | None = None,
@@ -230,8 +258,10 @@ def read_dataset(
     **Arguments**
 
     - `path`: the CSV file.
-    - `robot`: if given, joint angles are checked against its joint limits and a missing
-      `sigma_mm` defaults to its `experiment.noise_std_mm`.
+    - `robot`: if given, joint angles are checked against its joint limits, loads,
+      deflections and noise against what a measurement of it can show (a deflection
+      larger than the robot, a load of a thousand times its weight: `plausible_scales`),
+      and a missing `sigma_mm` defaults to its `experiment.noise_std_mm`.
     - `require_deflection`: the `dx_mm, dy_mm, dz_mm` columns must be present.
     - `ignore_deflection`: do not read deflection columns (a design, or data to simulate).
     - `ignore_unknown`: ignore unknown columns instead of rejecting the file.
@@ -293,6 +323,8 @@ def read_dataset(
                     )
             values[r, j] = v
         ids.append(row[col["id"]].strip() if "id" in col else "")
+    if robot is not None:
+        problems += _implausible_cells(robot, numeric, values, path, line_of)
     if problems:
         more = len(problems) - _MAX_REPORTED
         text = "\n  ".join(problems[:_MAX_REPORTED])
@@ -316,56 +348,6 @@ def read_dataset(
         ids=tuple(ids) if "id" in col else (),
         source=str(path),
     )
-
-
-class OutputError(OSError):
-    """A file could not be written (full disk, no permission, ...); the message names
-    the file and the cause. Any previous file of that name is left as it was."""
-
-
-def _new_file_mode(path: Path) -> int:
-    # A replaced file keeps its mode; a new one gets what `open` would give it (0666
-    # less the umask), not the 0600 of a temporary file.
-    try:
-        return stat.S_IMODE(path.stat().st_mode)
-    except OSError:
-        umask = os.umask(0o022)
-        os.umask(umask)
-        return 0o666 & ~umask
-
-
-@contextlib.contextmanager
-def atomic_file(path: str | Path, *, binary: bool = False) -> Iterator[Any]:
-    """Open `path` for writing (text, or bytes with `binary`) through a temporary file in
-    the same directory, flushed to disk and renamed into place on success: a failure
-    (full disk, an interrupt) never leaves a half-written file, nor clobbers an existing
-    one. The file's mode is the old file's, or for a new file the umask's. An `OSError`
-    on the way is raised as `OutputError` naming `path`."""
-    path = Path(path)
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        os.fchmod(fd, _new_file_mode(path))
-        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="") as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OutputError:
-        raise
-    except OSError as e:
-        raise OutputError(f"{path}: cannot write: {e.strerror or e}") from e
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def save_figure(fig: Any, path: str | Path, *, dpi: int = 120) -> None:
-    """Save a matplotlib figure to `path` atomically (`atomic_file`), in the format of
-    its suffix (PNG without one)."""
-    fmt = Path(path).suffix.lstrip(".").lower() or "png"
-    with atomic_file(path, binary=True) as fh:
-        fig.savefig(fh, format=fmt, dpi=dpi)
 
 
 def input_cells(data: Dataset) -> tuple[list[str], list[list[str]]]:

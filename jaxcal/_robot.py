@@ -18,6 +18,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._keys import check_keys
+from ._ranges import check_robot_values
 
 __all__ = [
     "AbstractEffect",
@@ -323,6 +324,7 @@ def _robot_from_dict(d: dict) -> Robot:
             max_load=load * G,
             noise_std=noise * 1e-3,
         )
+    check_robot_values(d)
     f = lambda x: jnp.asarray(np.asarray(x, dtype=float))
     return Robot(
         compliance=f(comp) * URAD,

@@ -7,7 +7,17 @@ import contextlib
 import sys
 
 from .._format import format_table
-from .main import add_overwrite_argument, add_robot_argument, check_output_path, print_json
+from .main import (
+    add_overwrite_argument,
+    add_robot_argument,
+    check_output_path,
+    input_size,
+    output_failed,
+    print_json,
+)
+
+#: Room a plot needs (a PNG of a few hundred kB).
+_PLOT_BYTES = 1_000_000
 
 
 def register(sub) -> None:
@@ -54,8 +64,11 @@ def run(args: argparse.Namespace) -> int:
     from ..compensation import compensate, read_path, write_commands
 
     inputs = {"the path file": args.path, "the robot file": args.robot}
-    check_output_path(args.output, "-o", inputs=inputs, overwrite=args.overwrite_input)
-    check_output_path(args.plot, "--plot", inputs={**inputs, "the -o output": args.output})
+    # The commands: the path's rows with about twice their columns.
+    size = 3 * input_size(args.path)
+    check_output_path(args.output, "-o", inputs=inputs, overwrite=args.overwrite_input, size=size)
+    plot_inputs = {**inputs, "the -o output": args.output}
+    check_output_path(args.plot, "--plot", inputs=plot_inputs, size=_PLOT_BYTES)
     if not args.max_cond > 1:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
     robot, calibration = load_calibrated(args.robot)
@@ -70,12 +83,8 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.flush()
         with contextlib.redirect_stdout(sys.stderr):
             _report(args, comp, calibration, written, None)
-        print(
-            f"jaxcal compensate: error: {e}; the {written} commands are on standard output "
-            "instead (redirect it with > FILE)",
-            file=sys.stderr,
-        )
-        return 2
+        kept = f"the {written} commands are on standard output instead (redirect it with > FILE)"
+        return output_failed("compensate", e, kept)
     if args.plot:
         import matplotlib
 
@@ -92,12 +101,9 @@ def run(args: argparse.Namespace) -> int:
             save_figure(fig, args.plot)
         except OSError as e:
             _report(args, comp, calibration, written, args.output)
-            print(
-                f"jaxcal compensate: error: {e}; the commands are written, only the plot "
-                "is missing",
-                file=sys.stderr,
+            return output_failed(
+                "compensate", e, "the commands are written, only the plot is missing"
             )
-            return 2
         finally:
             plt.close(fig)
     return _report(args, comp, calibration, written, args.output)

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from .._format import format_table
-from .main import add_robot_argument, check_output_path, print_json, seed
+from .main import add_robot_argument, check_output_path, output_failed, print_json, seed
 
 
 def register(sub) -> None:
@@ -333,8 +333,7 @@ def run_design(args: argparse.Namespace) -> int:
             if args.json
             else "on standard output as a data-format CSV (redirect it with > FILE)"
         )
-        print(f"jaxcal design: error: {failed}; the design is {where}", file=sys.stderr)
-        return 2
+        return output_failed("design", failed, f"the design is {where}")
     return code
 
 

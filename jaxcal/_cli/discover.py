@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from .._format import format_table
-from .main import add_robot_argument, check_output_path, print_json
+from .main import add_robot_argument, check_output_path, output_failed, print_json
 
 
 def register(sub) -> None:
@@ -50,7 +50,10 @@ def run(args: argparse.Namespace) -> int:
     from ..discrepancy._discover import discover
 
     check_output_path(
-        args.plot, "--plot", inputs={"the data file": args.data, "the robot file": args.robot}
+        args.plot,
+        "--plot",
+        inputs={"the data file": args.data, "the robot file": args.robot},
+        size=1_000_000,  # a PNG of a few hundred kB
     )
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
@@ -75,11 +78,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             save_figure(rep.plot(), args.plot)
         except OSError as e:
-            print(
-                f"jaxcal discover: error: {e}; the report is printed, only the plot is missing",
-                file=sys.stderr,
-            )
-            return 2
+            return output_failed("discover", e, "the report is printed, only the plot is missing")
         print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
     return code
 

@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import _thread
 import argparse
+import contextlib
 import importlib
 import json
 import os
+import signal
+import socket
 import sys
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,8 +28,16 @@ __all__ = [
     "add_robot_argument",
     "add_overwrite_argument",
     "check_output_path",
+    "output_failed",
     "print_json",
 ]
+
+#: Exit status of a write that failed after the work (the work is kept: printed, or
+#: the command says where); bad input is 2, an interrupt 130.
+OUTPUT_FAILED = 1
+#: Seconds an interrupted command has to end by itself (Python sees Ctrl-C only between
+#: bytecodes: a compile in native code can hold it for a minute) before it is ended.
+INTERRUPT_GRACE_S = 2.0
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
 COMMANDS = (
@@ -86,22 +98,21 @@ def check_output_path(
     *,
     inputs: dict[str, str | None] | None = None,
     overwrite: bool | None = None,
+    size: int = 64 * 1024,
 ) -> None:
     """Refuse, before any work starts, an output path that cannot be written: a
-    directory, or a file in a directory that does not exist (`ValueError` naming the
+    directory, a file in a directory that does not exist, cannot take a new file or has
+    less than `size` bytes free (the output's expected size; `ValueError` naming the
     option). `inputs` (what → path) are the command's input files: writing over one of
-    them is refused, unless `overwrite` is true (the command's `--overwrite-input`; `None`:
-    the command has no such option)."""
+    them is refused, unless `overwrite` is true (the command's `--overwrite-input`;
+    `None`: the command has no such option)."""
+    from .._output import check_writable
+
     if path is None or path == "-":
         return
     p = Path(path)
     if p.is_dir() or str(path).endswith(("/", os.sep)):
         raise ValueError(f"{option} {path}: is a directory; give a file name")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise ValueError(f"{option} {path}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise ValueError(f"{option} {path}: directory {parent} is not writable")
     for what, other in (inputs or {}).items():
         if overwrite or other is None or not _same_file(p, Path(other)):
             continue
@@ -110,6 +121,24 @@ def check_output_path(
             f"{option} {path}: is {what} {other}; writing there would destroy it. Give "
             f"another file name{hint}"
         )
+    why = check_writable(p, size)
+    if why:
+        raise ValueError(f"{option} {path}: {why}")
+
+
+def input_size(path: str) -> int:
+    """The size in bytes of an input file (0 if it cannot be read: the reading says why)."""
+    try:
+        return os.path.getsize(path)
+    except OSError:
+        return 0
+
+
+def output_failed(command: str, error: OSError, kept: str) -> int:
+    """A write that failed after the work: one line naming the file and the cause (the
+    `OutputError`) and where the work is instead (`kept`); exit status `OUTPUT_FAILED`."""
+    print(f"jaxcal {command}: error: {error}; {kept}", file=sys.stderr)
+    return OUTPUT_FAILED
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -159,14 +188,88 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line `argv` (default: the process's own, `sys.argv[1:]`) and
+    return its exit status. Ctrl-C anywhere in a command, set-up and compiles included,
+    is one line and status 130; on the process's own command line the process then ends
+    at once, without Python's shutdown (which can wait for, or crash in, XLA threads
+    still compiling or running)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    said = threading.Event()  # "interrupted" printed
+    with _end_if_stuck(args.command, said):
+        try:
+            return _run(args)
+        except KeyboardInterrupt:
+            said.set()
+            print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
+            if argv is None:
+                _end_now(130)
+            return 130
+
+
+def _end_now(status: int) -> None:
+    # No half-written output (`atomic_file`'s temporary files removed), streams flushed.
+    from .._output import remove_partial_files
+
+    remove_partial_files()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(status)
+
+
+@contextlib.contextmanager
+def _end_if_stuck(command: str, said: threading.Event):
+    """Make sure that Ctrl-C ends the process within `INTERRUPT_GRACE_S` seconds.
+
+    Python raises KeyboardInterrupt in the main thread only when it next runs bytecode:
+    a compile in XLA's native code, or the interpreter waiting at exit for a worker
+    thread that compiles, holds it back for as long as they take. Python's C signal
+    handler also writes the signal's number to a wakeup fd at once, whatever the main
+    thread does; a watcher thread reads it, and if the process is still there
+    `INTERRUPT_GRACE_S` seconds later, removes the temporary files of writes in
+    progress (no output is ever half-written: `atomic_file`), says "interrupted" if
+    the command has not, and ends the process with status 130. Outside the main thread
+    (no signals there) it does nothing."""
     try:
-        return _run(args)
-    except KeyboardInterrupt:
-        # Ctrl-C anywhere in a command, set-up and compiles included: one line, 130.
-        print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
-        return 130
+        reader, writer = socket.socketpair()
+    except OSError:
+        yield
+        return
+    writer.setblocking(False)
+    try:
+        previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    except ValueError:  # not the main thread
+        reader.close()
+        writer.close()
+        yield
+        return
+
+    def watch():
+        # Until the command ends (end of file: the writer is closed) or Ctrl-C comes.
+        # Then the reader stays open: a second Ctrl-C, or `_thread.interrupt_main`,
+        # writes to the fd again.
+        while True:
+            try:
+                got = reader.recv(64)
+            except OSError:
+                got = b""
+            if not got:
+                reader.close()
+                return
+            if signal.SIGINT in got:
+                break
+        time.sleep(INTERRUPT_GRACE_S)
+        if not said.is_set():
+            os.write(2, f"jaxcal {command}: interrupted\n".encode())
+        _end_now(130)
+
+    threading.Thread(target=watch, name="jaxcal-interrupt", daemon=True).start()
+    try:
+        yield
+    finally:
+        signal.set_wakeup_fd(previous)
+        writer.close()
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -177,6 +280,7 @@ def _run(args: argparse.Namespace) -> int:
     jax.config.update("jax_enable_x64", True)
     from .._io import DataError
     from .._model.simulate import DeflectionError
+    from .._output import OutputError
 
     if getattr(args, "uses_cache", True) and not getattr(args, "no_cache", False):
         _enable_cache()
@@ -198,10 +302,14 @@ def _run(args: argparse.Namespace) -> int:
         # The reader (e.g. `| head`) went away: not an error of ours.
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115
         return 0
+    except OutputError as e:
+        # A write that failed (full disk, permissions): one line naming the file.
+        # Outputs that fail after long work are caught by their command, which keeps
+        # the work (standard output) and exits with the same status.
+        print(f"jaxcal {args.command}: error: {e}", file=sys.stderr)
+        return OUTPUT_FAILED
     except OSError as e:
-        # A file that could not be written or read (full disk, permissions): one line
-        # naming it, as for bad input. Outputs that fail after long work are caught by
-        # their command, which keeps the work (standard output) before ending here.
+        # A file that could not be read: as for bad input.
         what = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
         print(f"jaxcal {args.command}: error: {what}", file=sys.stderr)
         return 2

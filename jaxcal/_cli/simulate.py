@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .main import add_overwrite_argument, add_robot_argument, check_output_path, seed
+from .main import (
+    add_overwrite_argument,
+    add_robot_argument,
+    check_output_path,
+    input_size,
+    output_failed,
+    seed,
+)
 
 
 def register(sub) -> None:
@@ -58,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         "-o",
         inputs={"the data file": args.data, "the robot file": args.robot},
         overwrite=args.overwrite_input,
+        size=2 * input_size(args.data),  # the input's rows, simulated columns added
     )
     if is_tree_file(args.robot):
         from .validate import simulate_tree
@@ -80,11 +88,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         # The work is done: the rows go to standard output instead.
         write_dataset(sys.stdout, out, sigma=noise is not None)
-        print(
-            f"jaxcal simulate: error: {e}; the {len(out)} rows are on standard output "
-            "instead (redirect it with > FILE)",
-            file=sys.stderr,
-        )
-        return 2
+        kept = f"the {len(out)} rows are on standard output instead (redirect it with > FILE)"
+        return output_failed("simulate", e, kept)
     print(f"wrote {len(out)} rows to {args.output}", file=sys.stderr)
     return 0
