@@ -27,6 +27,9 @@ from ._model.tree import TreeRobot
 __all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns"]
 
 _MAX_REPORTED = 25
+#: A marker coordinate (or a noise) beyond this, mm, is no measurement: a laser tracker
+#: reaches tens of metres, not a kilometre.
+FAR_MM = 1e6
 
 
 class MarkerData(eqx.Module):
@@ -148,12 +151,19 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
                         else f"{cell!r} is not a finite number"
                     )
                     problems.append(f"{where}, column {m}_{a}_mm: {what}")
+                elif abs(v) > FAR_MM:
+                    problems.append(
+                        f"{where}, column {m}_{a}_mm: {v:g} mm is not a plausible marker "
+                        f"position (farther than any tracker measures, {FAR_MM:g} mm)"
+                    )
                 else:
                     y[r, j, "xyz".index(a)] = v * 1e-3
         if "sigma_mm" in col:
             v = finite_number(row[col["sigma_mm"]].strip())
-            if v is None or v <= 0:
-                problems.append(f"{where}, column sigma_mm: must be a positive number")
+            if v is None or v <= 0 or v > FAR_MM:
+                problems.append(
+                    f"{where}, column sigma_mm: must be a positive number below {FAR_MM:g}"
+                )
             else:
                 sigma[r] = v * 1e-3
         ids.append(row[col["id"]].strip() if "id" in col else str(r + 1))

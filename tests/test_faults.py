@@ -564,7 +564,8 @@ def stuck(phase, info):
         while True:
             try:  # Ctrl-C comes once "stuck" is said, and is warded off
                 if not said:
-                    said = print("stuck", file=sys.stderr, flush=True) or True
+                    said = True
+                    print("stuck", file=sys.stderr, flush=True)
                 time.sleep(600)
             except KeyboardInterrupt:
                 pass
@@ -754,3 +755,16 @@ def test_absurd_robot_file_values_are_refused_unusual_ones_taken(path, absurd, k
         jaxcal.robot_from_dict(d, source="x.json")
     where[path[-1]] = unusual
     jaxcal.robot_from_dict(d, source="x.json")
+
+
+def test_an_absurd_marker_position_is_named(data_dir, tmp_path, capsys):
+    data = tmp_path / "m.csv"
+    data.write_bytes((data_dir / JUSTIN).read_bytes())
+    edit_column(data, "right_y_mm", lambda i, v: 1e300 if i == 2 else v)
+    rc, out, err = run(["validate", data, "--robot", "dlr_agile_justin"], capsys)
+    assert rc == 2 and out == ""
+    assert (
+        f"{data}, row 3 (line 4), column right_y_mm: 1e+300 mm is not a plausible marker "
+        "position (farther than any tracker measures, 1e+06 mm)"
+    ) in err.strip().splitlines()[-1]
+    assert err.startswith(f"jaxcal validate: error: {data}: 1 problem(s):")
