@@ -24,6 +24,7 @@ import sys
 import time
 import tracemalloc
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -509,6 +510,38 @@ def test_ctrl_c_stops_every_long_command_at_once(command, data_dir, tmp_path):
         folder = tmp_path / str(i)
         # Nothing half-written: the previous outputs as they were, no temporary file.
         assert {p.name: p.read_bytes() for p in folder.iterdir()} == before[i]
+
+
+def test_ctrl_c_stops_a_study_run_as_several_processes(data_dir, tmp_path):
+    # Ctrl-C sent to the command alone (not to its process group, as a shell would):
+    # its study processes stop too.
+    design = tmp_path / "design.csv"
+    design.write_bytes((data_dir / EXAMPLE).read_bytes())
+    args = ["montecarlo", design, "--processes", "2", "--trials", "400", "--method", "nonlinear"]
+    proc = start(PROCESS, *args, "--no-progress", cwd=tmp_path)
+
+    def workers():
+        found = []
+        for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+            with contextlib.suppress(OSError):
+                text = cmdline.read_bytes()
+                if str(design).encode() in text and b"--processes" not in text:
+                    found.append(cmdline.parent.name)
+        return found
+
+    deadline = time.monotonic() + 30
+    while len(workers()) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert len(workers()) == 2
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    rc, err, took = ended(proc)
+    assert rc == 130 and err.strip().splitlines()[-1] == "jaxcal montecarlo: interrupted"
+    assert took < 10
+    deadline = time.monotonic() + 10
+    while workers() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert workers() == []
 
 
 # The Ctrl-C arrives while a garbage-collector callback runs (jaxlib has one, called

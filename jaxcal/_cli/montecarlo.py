@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from .._identification.identify import METHODS
@@ -70,7 +71,6 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
 
     from .._identification.result import resolve_name
     from .._io import read_dataset
@@ -81,7 +81,11 @@ def run(args: argparse.Namespace) -> int:
     if args.processes < 1:
         raise ValueError(f"--processes must be at least 1, got {args.processes}")
     if args.processes > 1 and "JAXCAL_COORDINATOR" not in os.environ:
-        return run_local_processes(_worker_argv(args), args.processes)
+        try:
+            return run_local_processes(_worker_argv(args), args.processes)
+        except KeyboardInterrupt:
+            _interrupt_children()
+            raise
     if "JAXCAL_COORDINATOR" in os.environ:
         join_processes()
     if args.noise_mm is not None and not args.noise_mm > 0:
@@ -154,3 +158,21 @@ def _worker_argv(args: argparse.Namespace) -> list[str]:
         if on:
             argv.append(flag)
     return argv
+
+
+def _interrupt_children() -> None:
+    """Pass Ctrl-C on to this process's children (the study's processes): a shell sends
+    it to them too, `kill -INT` to this process alone does not. Linux (/proc); elsewhere
+    nothing."""
+    import signal
+    from pathlib import Path
+
+    me = os.getpid()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            # pid (comm) state ppid ...: the name may hold spaces and parentheses.
+            ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            if ppid == me:
+                os.kill(int(stat.parent.name), signal.SIGINT)
+        except (OSError, ValueError, IndexError):
+            continue
