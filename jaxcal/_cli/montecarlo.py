@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 
@@ -162,17 +163,29 @@ def _worker_argv(args: argparse.Namespace) -> list[str]:
 
 def _interrupt_children() -> None:
     """Pass Ctrl-C on to this process's children (the study's processes): a shell sends
-    it to them too, `kill -INT` to this process alone does not. Linux (/proc); elsewhere
-    nothing."""
+    it to them too, `kill -INT` to this process alone does not. A child still running
+    3 s later (held in native code, e.g. waiting for its coordinator) is killed: the
+    study writes no file. Linux (/proc); elsewhere nothing."""
     import signal
+    import time
     from pathlib import Path
 
-    me = os.getpid()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            # pid (comm) state ppid ...: the name may hold spaces and parentheses.
-            ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
-            if ppid == me:
-                os.kill(int(stat.parent.name), signal.SIGINT)
-        except (OSError, ValueError, IndexError):
-            continue
+    def children() -> list[int]:
+        found = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                # pid (comm) state ppid ...: the name may hold spaces and parentheses.
+                state, ppid = stat.read_text().rsplit(")", 1)[1].split()[:2]
+                if int(ppid) == os.getpid() and state != "Z":
+                    found.append(int(stat.parent.name))
+            except (OSError, ValueError):
+                continue
+        return found
+
+    for sig, wait in ((signal.SIGINT, 3.0), (signal.SIGKILL, 0.0)):
+        for pid in children():
+            with contextlib.suppress(OSError):
+                os.kill(pid, sig)
+        deadline = time.monotonic() + wait
+        while time.monotonic() < deadline and children():
+            time.sleep(0.1)
