@@ -431,9 +431,9 @@ TABLE34 = (
     "    for x in MIDS[sing]:\n"
     "        ax.axvline(x, c='r', lw=6, alpha=0.25)\n"
     "    ax.axhline(1.1, c='gray', ls=':', lw=0.8); ax.axhline(1.2, c='gray', ls='--', lw=0.8)\n"
-    "    ax.set_yscale('log'); ax.set_xlabel('middle q2, jaxcal (deg)'); paper_axis(ax); ax.legend(fontsize=7)\n"
+    "    ax.set_yscale('log' if ax is axs[0] else 'linear'); ax.set_xlabel('middle q2, jaxcal (deg)'); paper_axis(ax); ax.legend(fontsize=7)\n"
     "    ax.set_title(f'Fig. 8 {t}: std / its minimum (red: singular level)', fontsize=9)\n"
-    "axs[0].set_ylabel('std / its minimum (log)');"
+    "axs[0].set_ylabel('std / its minimum (log)'); axs[1].set_ylabel('std / its minimum');"
 )
 
 TABLE5 = (
@@ -568,7 +568,7 @@ CELLS = [
         "the red band in the plot, left out of every minimum and band.\n\n"
         "**Where jaxcal disagrees, and why.** O1 is the absolute trace, and on our robot "
         "the wrist compliance k6 (the largest) holds nearly all of it (printed above): O1 "
-        "follows the wrist, and its best middle level is where k6 is best determined (k6's "
+        "follows the wrist, and its best middle level is next to where k6 is best determined (k6's "
         "column in the Tables 3–4 printout below). O2 and O3 follow the "
         "middle level's own k2, whose variance falls towards the 0° level, where the lower "
         "arm is horizontal and the load's lever arm on joint 2 longest (compare the O2 "
