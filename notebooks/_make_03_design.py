@@ -325,8 +325,9 @@ SUMMARY = (
     "    ('Table 5 plan', 'the paper\\'s optimum', f'default design: O1 {O1_def / float(c_plan.trace):.3f}x the plan\\'s, efficiency {eff_def:.2f}',\n"
     "     'differ', 'all six angles optimised (Table 5: q2, q3 by rule, wrist by its own optimisation)'),\n"
     "]\n"
-    "w = [max(len(str(r[i])) for r in summary) for i in range(4)]\n"
-    "print(' | '.join(h.ljust(w[i]) for i, h in enumerate(('item', 'paper', 'jaxcal', 'verdict'))) + ' | why')\n"
+    "head = ('item', 'paper', 'jaxcal', 'verdict', 'why')\n"
+    "w = [max(len(str(r[i])) for r in [head, *summary]) for i in range(4)]\n"
+    "print(' | '.join(h.ljust(w[i]) for i, h in enumerate(head[:4])) + ' | ' + head[4])\n"
     "for r in summary:\n"
     "    print(' | '.join(str(r[i]).ljust(w[i]) for i in range(4)) + ' | ' + r[4])"
 )
