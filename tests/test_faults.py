@@ -366,7 +366,7 @@ def test_save_robot_on_a_full_disk_still_reports(linear_fit, example_copy, tmp_p
     before = out.read_bytes()
     with disk_full(1024):
         rc, stdout, err = run(args, capsys)
-    assert rc == 2
+    assert rc == 1
     assert f"{out}: cannot write" in last_error(err, "identify")
     report = json.loads(stdout)
     assert "k2_urad_per_Nm" in report["parameters"] and "saved_robot" not in report

@@ -13,6 +13,7 @@ from .main import (
     add_robot_argument,
     check_output_path,
     fix_names,
+    output_failed,
     print_json,
 )
 
@@ -149,7 +150,8 @@ def run(args: argparse.Namespace) -> int:
     for w in said:
         print(f"jaxcal identify: warning: {w}", file=sys.stderr)
     advice = None
-    if res.undetermined() and not args.no_advice:
+    # Advice is for a fit that worked: a failed one is said so below instead.
+    if res.undetermined() and not args.no_advice and bool(res.converged):
         print("computing the measurements that would determine them...", file=sys.stderr)
         advice = advise(robot, data, res, tuple(fix_names(args.fix)))
     failed = not bool(res.converged)
@@ -219,9 +221,10 @@ def advise(robot, data, res, known: tuple[str, ...]):
 
 
 def _not_saved(error: OSError) -> int:
-    print(
-        f"jaxcal identify: error: {error}; the calibrated robot file was not written "
-        "(any previous file there is unchanged)",
-        file=sys.stderr,
+    # The work is done and printed: a write that fails after it is not bad input.
+    return output_failed(
+        "identify",
+        error,
+        "the calibrated robot file was not written (any previous file there is unchanged; "
+        "the results are printed above)",
     )
-    return 2

@@ -288,6 +288,10 @@ def identify(
             free_values.setdefault(n, res.parameter(n))
         if undetermined == "free" or not over or not _holdable(method, over):
             break
+        if all(n in fixed or n in over for n in res.names):
+            # Nothing would be left to fit: every estimate is flagged, none held (data
+            # this uninformative are said so by the plausibility checks below).
+            break
         fixed = (*fixed, *over)
         res = run(fixed)
     flagged = tuple(n for n in names if n in free_values)
