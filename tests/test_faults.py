@@ -801,3 +801,23 @@ def test_an_absurd_marker_position_is_named(data_dir, tmp_path, capsys):
         "position (farther than any tracker measures, 1e+06 mm)"
     ) in err.strip().splitlines()[-1]
     assert err.startswith(f"jaxcal validate: error: {data}: 1 problem(s):")
+
+
+EARLY = """
+import sys
+from jaxcal_cli import main
+print("running", file=sys.stderr, flush=True)
+sys.argv = ["jaxcal", *sys.argv[1:]]
+sys.exit(main())
+"""
+
+
+def test_ctrl_c_while_jax_is_still_being_imported(tmp_path):
+    """The `jaxcal` script's entry point runs before jaxcal and JAX are imported (a second
+    or more, cold): Ctrl-C then is one line and status 130 too, no traceback."""
+    proc = start(EARLY, "cache", "info", cwd=tmp_path)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    rc, err, seconds = ended(proc)
+    assert rc == 130, err
+    assert "interrupted" in err and "Traceback" not in err and seconds < 5
