@@ -292,5 +292,5 @@ def test_gross_error_cli_says_so(example, tmp_path, capsys):
     d = json.loads(out)
     assert [g["row"] for g in d["gross_errors"]] == [20] and d["gross_errors_excluded"]
     assert 20 not in d["outliers"] and d["outliers"] == []
-    rc, _, err = run(["identify", bad, "--keep-outliers"], capsys)
+    rc, _, err = run(["identify", bad, "--keep-outliers", "--no-advice"], capsys)
     assert "row 20" in err and "the estimates include it and are not to be trusted" in err
