@@ -821,3 +821,38 @@ def test_ctrl_c_while_jax_is_still_being_imported(tmp_path):
     rc, err, seconds = ended(proc)
     assert rc == 130, err
     assert "interrupted" in err and "Traceback" not in err and seconds < 5
+
+
+SMALL_TREE = {
+    "name": "two_link",
+    "kind": "tree",
+    "joints": [{"name": "a", "limits_deg": [-170, 170]}, {"name": "b"}],
+    "elements": [
+        {"name": "l1", "dh": {"d_m": 0.3}, "coupling": {"a": 1}},
+        {"name": "l2", "parent": "l1", "dh": {"a_m": 0.4, "alpha_deg": 90}, "coupling": {"b": 1}},
+    ],
+    "masses": [{"element": "l2", "kg": 5.0, "at_m": [0.2, 0.0, 0.0]}],
+    "markers": [{"name": "tip", "element": "l2", "at_m": [0.5, 0.0, 0.1]}],
+    "noise_std_mm": 0.05,
+}
+
+
+def test_tree_save_robot_on_a_full_disk_prints_the_results(tmp_path, capsys):
+    robot = tmp_path / "two_link.json"
+    robot.write_text(json.dumps(SMALL_TREE))
+    plan = tmp_path / "plan.csv"
+    rows = [f"{i},{10 * i - 90},{5 * i}" for i in range(20)]
+    plan.write_text("\n".join(["id,q1_deg,q2_deg", *rows]) + "\n")
+    meas = tmp_path / "meas.csv"
+    args = ["simulate", plan, "--robot", robot, "--noise-mm", "0.05", "-o", meas]
+    assert run(args, capsys)[0] == 0
+    out = tmp_path / "cal.json"
+    args = ["identify", meas, "--robot", robot, "--params", "frames", "--save-robot", out]
+    assert run(args, capsys)[0] == 0
+    before = out.read_bytes()
+    with disk_full(1024):
+        rc, stdout, err = run(args, capsys)
+    assert rc == 1
+    assert f"{out}: cannot write" in last_error(err, "identify")
+    assert "tip.x" in stdout and "RMS 3-D marker error" in stdout  # the results, printed
+    assert out.read_bytes() == before

@@ -13,7 +13,14 @@ import sys
 import equinox as eqx
 import numpy as np
 
-from .main import add_robot_argument, check_output_path, fix_names, print_json, seed
+from .main import (
+    add_robot_argument,
+    check_output_path,
+    fix_names,
+    output_failed,
+    print_json,
+    seed,
+)
 
 #: The published Agile Justin results (held-out TCP error, mm: mean, std, max) per
 #: stage: Tenhumberg & Bäuml, Humanoids 2021, table "Calibration results".
@@ -193,7 +200,7 @@ def identify_tree(args: argparse.Namespace) -> int:
                     "unit": p.unit,
                 }
             )
-    saved = None
+    saved, unsaved = None, None
     if args.save_robot and cal.converged:
         calibration = {
             "date": datetime.date.today().isoformat(),
@@ -204,12 +211,15 @@ def identify_tree(args: argparse.Namespace) -> int:
             "parameters": params,
             "held": list(cal.held),
         }
-        if urdf_out:
-            saved = str(save_urdf(cal.robot, args.save_robot, calibration=calibration)[1])
-        else:
-            with atomic_file(args.save_robot) as fh:
-                json.dump({**tree_to_dict(cal.robot), "calibration": calibration}, fh, indent=1)
-            saved = args.save_robot
+        try:
+            if urdf_out:
+                saved = str(save_urdf(cal.robot, args.save_robot, calibration=calibration)[1])
+            else:
+                with atomic_file(args.save_robot) as fh:
+                    json.dump({**tree_to_dict(cal.robot), "calibration": calibration}, fh, indent=1)
+                saved = args.save_robot
+        except OSError as e:  # the work is done: printed below, then the failure said
+            unsaved = e
     summary = {
         "robot": robot.name,
         "data": args.data,
@@ -249,6 +259,13 @@ def identify_tree(args: argparse.Namespace) -> int:
             )
         elif saved:
             print(f"calibrated robot written to {saved} (use it with --robot {saved})")
+    if unsaved is not None:
+        return output_failed(
+            "identify",
+            unsaved,
+            "the calibrated robot was not written (any previous file there is unchanged; "
+            "the results are printed above)",
+        )
     if not cal.converged:
         print(f"jaxcal identify: error: {cal.message}", file=sys.stderr)
         return 1
