@@ -54,7 +54,7 @@ cells = [
         "gives the rest: a compliance for each joint spring (µrad/(N·m); here only the "
         "spring about each joint axis), two markers on the tool flange, where the laser "
         "tracker stands, and the measurement noise. On the command line the same sidecar "
-        "is a robot file `{\"kind\": \"urdf\", \"urdf\": \"ur5_robot.urdf\", ...}` given "
+        'is a robot file `{"kind": "urdf", "urdf": "ur5_robot.urdf", ...}` given '
         "to `--robot`.",
     ),
     (
