@@ -178,3 +178,13 @@ def test_bad_urdfs_exit_2_naming_the_element(tmp_path, capsys, joint2, words):
     assert main(["simulate", str(plan), "--robot", str(urdf)]) == 2
     err = capsys.readouterr().err
     assert words in err and "Traceback" not in err
+
+
+def test_a_urdf_without_sidecar_says_its_defaults(tmp_path, capsys):
+    urdf = tmp_path / "arm.urdf"
+    joint2 = '<joint name="j2" type="fixed"><parent link="b"/><child link="c"/></joint>'
+    urdf.write_text(_arm(joint2))
+    plan = _plan(tmp_path / "plan.csv", np.array([[10.0], [20.0]]), ["q1_deg"])
+    assert main(["simulate", str(plan), "--robot", str(urdf), "-o", str(tmp_path / "o.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "defaults used" in err and "zero compliances" in err and "markers at the" in err

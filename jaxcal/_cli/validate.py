@@ -73,11 +73,22 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _load(args):
-    from .._markers import read_markers
+def _robot(args):
+    """The tree robot of `--robot`; a URDF read without a sidecar says which defaults
+    stand in for what it cannot say (compliances, markers, world frame, ...)."""
     from .._model.robot_files import load_tree
 
     robot = load_tree(args.robot)
+    said = robot.description.partition("Defaults (not in the URDF or its sidecar): ")[2]
+    if said:
+        print(f"jaxcal {args.command}: note: {args.robot}: defaults used: {said}", file=sys.stderr)
+    return robot
+
+
+def _load(args):
+    from .._markers import read_markers
+
+    robot = _robot(args)
     return robot, read_markers(args.data, robot)
 
 
@@ -276,10 +287,9 @@ def simulate_tree(args: argparse.Namespace) -> int:
     """`jaxcal simulate` for a tree robot: the model's marker positions at the file's poses."""
     from .._identification.elastogeometric import predicted_markers
     from .._markers import read_markers, write_markers
-    from .._model.robot_files import load_tree
 
     check_output_path(args.output, "-o")
-    robot = load_tree(args.robot)
+    robot = _robot(args)
     data = read_markers(args.data, robot, require_markers=False)
     y, ok = predicted_markers(robot, data)
     if not ok.all():
