@@ -164,8 +164,9 @@ def _worker_argv(args: argparse.Namespace) -> list[str]:
 def _interrupt_children() -> None:
     """Pass Ctrl-C on to this process's children (the study's processes): a shell sends
     it to them too, `kill -INT` to this process alone does not. A child still running
-    3 s later (held in native code, e.g. waiting for its coordinator) is killed: the
-    study writes no file. Linux (/proc); elsewhere nothing."""
+    1 s later (held in native code, e.g. waiting for its coordinator) is killed: the
+    study writes no file. (Within the 2 s after which `main` ends this process itself:
+    an orphan would outlive it.) Linux (/proc); elsewhere nothing."""
     import signal
     import time
     from pathlib import Path
@@ -182,7 +183,7 @@ def _interrupt_children() -> None:
                 continue
         return found
 
-    for sig, wait in ((signal.SIGINT, 3.0), (signal.SIGKILL, 0.0)):
+    for sig, wait in ((signal.SIGINT, 1.0), (signal.SIGKILL, 0.0)):
         for pid in children():
             with contextlib.suppress(OSError):
                 os.kill(pid, sig)
