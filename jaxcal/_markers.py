@@ -77,6 +77,12 @@ def marker_columns(robot: TreeRobot) -> tuple[tuple[str, ...], tuple[str, ...]]:
     return q, m
 
 
+def joint_units(robot: TreeRobot) -> np.ndarray:
+    """`(N,)` file units per SI unit of each joint column: deg per rad, or mm per m for a
+    prismatic joint."""
+    return np.array([1e3 if s else np.degrees(1.0) for s in robot.joint_prismatic])
+
+
 def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = True) -> MarkerData:
     """Read and validate an absolute-measurement CSV for `robot`; every problem (unknown
     or incomplete marker columns, non-numeric or non-finite cells, angles beyond the
@@ -117,8 +123,7 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     y = np.full((n, k, 3), np.nan)
     sigma = np.full(n, robot.noise_std)
     ids: list[str] = []
-    # File units per SI unit of each joint: deg per rad, or mm per m for a slide.
-    unit = np.array([1e3 if s else np.degrees(1.0) for s in robot.joint_prismatic])
+    unit = joint_units(robot)
     limits = np.asarray(robot.joint_limits) * unit[:, None]
     problems: list[str] = []
     for r, (line, row) in enumerate(body):
@@ -191,13 +196,13 @@ def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot,
     was) or an open text stream."""
     qcols, mcols = marker_columns(robot)
     y = np.asarray(markers) * 1e3
+    unit = joint_units(robot)
     with contextlib.ExitStack() as stack:
         fh = stack.enter_context(atomic_file(path)) if isinstance(path, str | Path) else path
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["id", *qcols, *mcols, "sigma_mm"])
         for r in range(len(data)):
-            unit = [1e3 if s else np.degrees(1.0) for s in robot.joint_prismatic]
-            cells = [f"{v * u:.12g}" for v, u in zip(np.asarray(data.q[r]), unit, strict=True)]
+            cells = [f"{v:.12g}" for v in np.asarray(data.q[r]) * unit]
             cells += ["" if not np.isfinite(v) else f"{v:.6f}" for v in y[r].ravel()]
             label = data.ids[r] if data.ids else str(r + 1)
             w.writerow([label, *cells, f"{float(data.sigma[r]) * 1e3:g}"])

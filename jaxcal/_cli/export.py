@@ -37,12 +37,12 @@ def run(args: argparse.Namespace) -> int:
     from .._io import atomic_file
     from .._model.robot_files import load_tree
     from .._model.tree import tree_to_dict
-    from .._model.urdf_export import save_urdf
+    from .._model.urdf_export import save_urdf, sidecar_path
 
     out = Path(args.output)
     if out.suffix.lower() not in (".urdf", ".json"):
         raise ValueError(f"-o {out}: give a name ending in .urdf (URDF + sidecar) or .json")
-    sidecar = out.with_suffix(".json") if out.suffix.lower() == ".urdf" else None
+    sidecar = sidecar_path(out) if out.suffix.lower() == ".urdf" else None
     check_output_path(args.output, "-o", inputs={"--robot": args.robot})
     if sidecar is not None:
         check_output_path(str(sidecar), "-o (its sidecar)", inputs={"--robot": args.robot})

@@ -188,13 +188,13 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._identification.parameter_groups import parse_groups
     from .._io import atomic_file
     from .._model.tree import tree_to_dict
-    from .._model.urdf_export import save_urdf
+    from .._model.urdf_export import save_urdf, sidecar_path
 
     check_output_path(args.save_robot, "--save-robot")
     save: str | None = args.save_robot
     urdf_out = save is not None and save.lower().endswith(".urdf")
     if save is not None and urdf_out:  # its sidecar robot file is written beside it
-        check_output_path(save[:-5] + ".json", "--save-robot (its sidecar)")
+        check_output_path(str(sidecar_path(save)), "--save-robot (its sidecar)")
     robot, data = _load(args)
     groups = parse_groups(getattr(args, "params", None), robot)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)

@@ -40,7 +40,7 @@ import numpy as np
 from .._io import atomic_file
 from .tree import TreeRobot, rpy_from_matrix, tree_to_dict
 
-__all__ = ["tree_to_urdf", "save_urdf"]
+__all__ = ["tree_to_urdf", "save_urdf", "sidecar_path"]
 
 
 def _num(x: float) -> str:
@@ -237,6 +237,11 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
     return "\n".join(lines), sidecar
 
 
+def sidecar_path(path: str | Path) -> Path:
+    """Where `save_urdf` writes the sidecar of the URDF `path`: same stem, `.json`."""
+    return Path(path).with_suffix(".json")
+
+
 def save_urdf(
     robot: TreeRobot, path: str | Path, *, calibration: dict | None = None
 ) -> tuple[Path, Path]:
@@ -247,7 +252,7 @@ def save_urdf(
     path = Path(path)
     if path.suffix.lower() != ".urdf":
         raise ValueError(f"{path}: a URDF's name ends in .urdf")
-    side_path = path.with_suffix(".json")
+    side_path = sidecar_path(path)
     text, sidecar = tree_to_urdf(robot, name=path.stem)
     robot_file = {"kind": "urdf", "urdf": os.path.basename(path), **sidecar}
     if calibration is not None:
