@@ -1,8 +1,12 @@
 """Test configuration: identification and µm-level checks need float64, enabled here
 explicitly (the library never flips global JAX config on import)."""
 
+import contextlib
+import gc
 import os
+import resource
 import shutil
+import signal
 import tempfile
 from pathlib import Path
 
@@ -28,7 +32,7 @@ def pytest_configure(config):
     # persistent compilation cache. Point it at a directory of this run, shared by the
     # xdist workers and notebook kernels (they inherit the environment), never at the
     # user's own cache.
-    if not hasattr(config, "workerinput"):
+    if not hasattr(config, "workerinput") and os.environ.get("JAXCAL_CACHE_DIR") != "off":
         os.environ["JAXCAL_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxcal-test-cache-")
     # The test processes use it too, as a user's command line and notebooks do: a
     # program compiled by one test file is read back, not compiled again, by another
@@ -39,8 +43,36 @@ def pytest_configure(config):
 
 
 def pytest_unconfigure(config):
-    if not hasattr(config, "workerinput"):
+    if not hasattr(config, "workerinput") and os.environ.get("JAXCAL_CACHE_DIR") != "off":
         shutil.rmtree(os.environ.get("JAXCAL_CACHE_DIR", ""), ignore_errors=True)
+
+
+def _mappings() -> tuple[int, int]:
+    """(memory mappings of this process, the kernel's limit per process); (0, 0) where
+    /proc does not say."""
+    try:
+        with open("/proc/self/maps") as maps:
+            used = sum(1 for _ in maps)
+        with open("/proc/sys/vm/max_map_count") as limit:
+            return used, int(limit.read())
+    except (OSError, ValueError):
+        return 0, 0
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _release_compiled_programs():
+    # Every program XLA compiles for the CPU holds a few memory mappings of its own
+    # (about 6 for a small one, hundreds for a vmapped equilibrium) until it is dropped,
+    # and a worker runs many test files: past the kernel's limit on mappings
+    # (vm.max_map_count, 65530 by default) any allocation fails and XLA aborts the
+    # process. After a file whose worker holds more than a quarter of the limit, the
+    # compiled programs are released (the next file recompiles what it needs, or reads
+    # it from the persistent cache).
+    yield
+    used, limit = _mappings()
+    if limit and used > limit // 4:
+        jax.clear_caches()
+        gc.collect()
 
 
 DATA = Path(__file__).parent / "data"
@@ -56,3 +88,24 @@ def robot():
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
+
+
+@contextlib.contextmanager
+def _disk_full(limit: int = 1024):
+    """While inside, no file of this process grows beyond `limit` bytes: a write past it
+    fails as on a full disk (EFBIG instead of ENOSPC; root is not exempt, unlike a
+    read-only directory)."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+
+
+@pytest.fixture
+def disk_full():
+    """`with disk_full(limit):` a full disk for this process's writes past `limit` bytes."""
+    return _disk_full

@@ -255,6 +255,32 @@ def test_cli_discover_example_answers_none(data_dir, capsys, study):
     assert len(out["candidates"]) == len(default_candidates(jaxcal.load_robot()))
 
 
+def test_cli_discover_plot_on_a_full_disk_keeps_the_report(
+    data_dir, tmp_path, capsys, study, disk_full
+):
+    # (after the study: the compiled model is reused) The plot is written after the
+    # work: when it cannot be, the report is still printed, the previous plot is kept,
+    # no partial file is left, and the status is 1.
+    from jaxcal.internal.cli import main
+
+    plot = tmp_path / "residuals.png"
+    args = ["discover", str(data_dir / "example_calibration.csv"), "--plot", str(plot)]
+    assert main(args) == 0
+    first = capsys.readouterr()
+    image = plot.read_bytes()
+    assert image.startswith(b"\x89PNG") and f"wrote {plot}" in first.err
+    with disk_full(4096):
+        rc = main(args)
+    out = capsys.readouterr()
+    assert rc == 1 and "Traceback" not in out.err
+    (line,) = [ln for ln in out.err.splitlines() if "error:" in ln]
+    assert line.startswith("jaxcal discover: error: ") and f"{plot}: cannot write" in line
+    assert "only the plot is missing" in line
+    assert out.out == first.out  # the same report, printed in full
+    assert plot.read_bytes() == image
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["residuals.png"]
+
+
 def test_discover_rejects_float32_and_missing_deflections(robot, example):
     with pytest.raises(ValueError, match="no deflections"):
         jaxcal_discover = __import__("jaxcal.discrepancy._discover", fromlist=["discover"]).discover

@@ -36,21 +36,6 @@ from jaxcal.internal.cli import main
 EXAMPLE = "example_calibration.csv"
 
 
-@contextlib.contextmanager
-def disk_full(limit: int = 1024):
-    """While inside, no file of this process grows beyond `limit` bytes: a write past it
-    fails as on a full disk (EFBIG instead of ENOSPC; root is not exempt, unlike a
-    read-only directory)."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-        signal.signal(signal.SIGXFSZ, handler)
-
-
 def only_files(folder, *names):
     """The folder holds exactly `names`: no temporary or partial file left beside them."""
     assert sorted(p.name for p in folder.iterdir()) == sorted(names)
@@ -68,7 +53,7 @@ def linear_fit(data_dir):
 # ------------------------------------------------------------------ atomic outputs
 
 
-def test_save_robot_keeps_the_previous_file_on_a_full_disk(linear_fit, tmp_path):
+def test_save_robot_keeps_the_previous_file_on_a_full_disk(linear_fit, tmp_path, disk_full):
     robot, res = linear_fit
     out = tmp_path / "cal.json"
     jaxcal.save_robot(out, robot, res)
@@ -80,7 +65,7 @@ def test_save_robot_keeps_the_previous_file_on_a_full_disk(linear_fit, tmp_path)
     only_files(tmp_path, "cal.json")
 
 
-def test_figures_are_replaced_in_one_step_in_their_suffix_format(tmp_path):
+def test_figures_are_replaced_in_one_step_in_their_suffix_format(tmp_path, disk_full):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -345,7 +330,7 @@ def last_error(err, command):
     return lines[-1]
 
 
-def test_simulate_on_a_full_disk_prints_the_rows(example_copy, tmp_path, capsys):
+def test_simulate_on_a_full_disk_prints_the_rows(example_copy, tmp_path, capsys, disk_full):
     out = tmp_path / "sim.csv"
     assert run(["simulate", example_copy, "-o", out], capsys)[0] == 0
     before = out.read_bytes()
@@ -359,7 +344,9 @@ def test_simulate_on_a_full_disk_prints_the_rows(example_copy, tmp_path, capsys)
     only_files(tmp_path, "meas.csv", "sim.csv")
 
 
-def test_save_robot_on_a_full_disk_still_reports(linear_fit, example_copy, tmp_path, capsys):
+def test_save_robot_on_a_full_disk_still_reports(
+    linear_fit, example_copy, tmp_path, capsys, disk_full
+):
     out = tmp_path / "cal.json"
     args = ["identify", example_copy, "--method", "linear", "--save-robot", out, "--json"]
     assert run(args, capsys)[0] == 0
@@ -375,7 +362,7 @@ def test_save_robot_on_a_full_disk_still_reports(linear_fit, example_copy, tmp_p
 
 
 @pytest.mark.slow
-def test_compensate_on_a_full_disk(example_copy, tmp_path, capsys):
+def test_compensate_on_a_full_disk(example_copy, tmp_path, capsys, disk_full):
     lines = example_copy.read_text().splitlines()
     example_copy.write_text("\n".join(ln.rsplit(",", 3)[0] for ln in lines[:4]) + "\n")
     out, plot = tmp_path / "c.csv", tmp_path / "c.png"
@@ -400,7 +387,7 @@ def test_compensate_on_a_full_disk(example_copy, tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_design_on_a_full_disk_prints_the_design(tmp_path, capsys):
+def test_design_on_a_full_disk_prints_the_design(tmp_path, capsys, disk_full):
     out = tmp_path / "design.csv"
     args = ["design", "--configs", "3", "--model", "linear", "--starts", "1", "--steps", "2"]
     args += ["--pool", "0", "--bound-pool", "0", "-o", out]
@@ -837,7 +824,7 @@ SMALL_TREE = {
 }
 
 
-def test_tree_save_robot_on_a_full_disk_prints_the_results(tmp_path, capsys):
+def test_tree_save_robot_on_a_full_disk_prints_the_results(tmp_path, capsys, disk_full):
     robot = tmp_path / "two_link.json"
     robot.write_text(json.dumps(SMALL_TREE))
     plan = tmp_path / "plan.csv"
