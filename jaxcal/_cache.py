@@ -10,6 +10,10 @@ Where the cache lives: `$JAXCAL_CACHE_DIR` if set (`off` disables it), else
 `$XDG_CACHE_HOME/jaxcal`, else `~/.cache/jaxcal`. A directory that cannot be created or
 written is a warning, never a failure: jaxcal then simply compiles as without a cache.
 JAX itself warns and recompiles when an entry cannot be read (e.g. a corrupt file).
+Each entry is written whole (a temporary file beside it, renamed into place), so that a
+second jaxcal process reading the cache at the same moment never meets a half-written
+entry: JAX's own file cache writes entries in place, and a concurrent reader warned
+"incomplete or truncated stream" and compiled again.
 Beside XLA's executables the directory keeps the traced form of the largest programs
 (`exported/`, see `_exported.py`), so that a warm run skips tracing them as well.
 """
@@ -102,6 +106,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | No
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     _reset()
+    _install_atomic_entries(target)
     set_export_directory(target)
     return target
 
@@ -111,6 +116,56 @@ def disable_compilation_cache() -> None:
     jax.config.update("jax_compilation_cache_dir", None)
     _reset()
     set_export_directory(None)
+
+
+#: Prefix of an entry being written (renamed to `<key>-cache` when complete).
+_PARTIAL_PREFIX = ".entry-"
+
+
+def _install_atomic_entries(target: Path) -> None:
+    # JAX builds its file cache on the first compile unless one is in place; there is
+    # no public hook for it. Where this JAX's internals differ (a version without them),
+    # its own cache is used as it is (entries written in place).
+    import jax._src.compilation_cache as jax_cache
+
+    try:
+        base = jax_cache.CacheInterface
+    except AttributeError:
+        return
+    internals = ("_cache", "_cache_initialized", "_cache_initialized_mutex")
+    if not all(hasattr(jax_cache, name) for name in internals):
+        return
+
+    class AtomicFileCache(base):
+        """JAX's file layout (`<key>-cache`), each entry written whole."""
+
+        def __init__(self, path: Path):
+            self._path = path
+
+        def get(self, key: str) -> bytes | None:
+            try:
+                return (self._path / f"{key}-cache").read_bytes()
+            except FileNotFoundError:
+                return None
+
+        def put(self, key: str, value: bytes) -> None:
+            target = self._path / f"{key}-cache"
+            if target.exists():
+                return
+            # No fsync: a reader needs the rename alone to see a whole entry, and an
+            # entry lost to a power cut is compiled again.
+            fd, tmp = tempfile.mkstemp(dir=self._path, prefix=_PARTIAL_PREFIX, suffix=".tmp")
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(value)
+                os.replace(tmp, target)
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+
+    with jax_cache._cache_initialized_mutex:
+        jax_cache._cache = AtomicFileCache(target)
+        jax_cache._cache_initialized = True
 
 
 def _reset() -> None:
@@ -155,7 +210,10 @@ def clear_cache(path: str | os.PathLike | None = None) -> int:
     foreign = [
         f
         for f in target.rglob("*")
-        if f.is_file() and not f.name.endswith(("-cache", "-atime")) and ".probe-" not in f.name
+        if f.is_file()
+        and not f.name.endswith(("-cache", "-atime"))
+        and ".probe-" not in f.name
+        and not f.name.startswith(_PARTIAL_PREFIX)
     ]
     if foreign:
         raise ValueError(

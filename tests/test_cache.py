@@ -103,3 +103,48 @@ def test_no_cache_flag_parses(data_dir, capsys, tmp_path):
     out = tmp_path / "o.csv"
     rc = main(["simulate", str(data_dir / "example_calibration.csv"), "-o", str(out), "--no-cache"])
     assert rc == 0 and out.exists()
+
+
+_FULL_DISK_WRITER = textwrap.dedent(
+    """
+    import resource, signal, sys, warnings
+    import jax, jax.numpy as jnp, jaxcal
+    warnings.simplefilter("always")
+    jaxcal.enable_compilation_cache()
+    if sys.argv[1] != "-":  # a full disk: no file grows past this many bytes
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[1]), resource.RLIM_INFINITY))
+    f = jax.jit(lambda x: jnp.tanh(jnp.sin(x) @ x.T) @ jnp.cos(x))
+    print("value", float(f(jnp.ones((8, 8))).sum()))
+    """
+)
+
+
+def _write(limit, env):
+    out = subprocess.run(
+        [sys.executable, "-c", _FULL_DISK_WRITER, str(limit)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    return out
+
+
+def test_an_entry_is_written_whole_or_not_at_all(tmp_path):
+    # On a full disk an entry cannot be written: it is then absent, not truncated (an
+    # entry written in place would be left cut at the limit, and every later process
+    # would warn that it cannot read it). No temporary file is left either.
+    cache = tmp_path / "cache"
+    env = {**os.environ, "JAXCAL_CACHE_DIR": str(cache)}
+    first = _write(1024, env)
+    assert "Error writing persistent compilation cache entry" in first.stderr
+    assert sorted(p.name for p in cache.iterdir() if not p.name.startswith(".probe-")) == []
+    # With room, the entries are written and read back by the next process.
+    _write("-", env)
+    entries = sorted(cache.glob("*-cache"))
+    assert entries and max(p.stat().st_size for p in entries) > 1024
+    again = _write("-", env)
+    assert "Error reading" not in again.stderr
+    assert again.stdout == first.stdout
