@@ -2,7 +2,12 @@
 splits, and the time of `jaxcal identify` on 300 rows from the command line, cold (a
 new process, no compilation cache) and warm (a new process, the cache filled).
 
-Run: `python benchmarks/bench_justin.py [--seeds 0 1 2] [--no-validate] [--no-identify]`.
+With `--hold-study`, the full calibration of each split twice: the springs the
+training rows do not determine one by one (relative std above 10 %) left fitted, then
+held at the robot file's values (`hold_undetermined=True`); held-out error of both.
+
+Run: `python benchmarks/bench_justin.py [--seeds 0 1 2] [--no-validate] [--no-identify]
+[--hold-study]`.
 """
 
 from __future__ import annotations
@@ -74,12 +79,30 @@ def identify_times() -> None:
             print(f"identify 300 rows, {label}: {dt:.1f} s")
 
 
+def hold_study(seeds: list[int]) -> None:
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    data = jaxcal.read_markers(DATA, robot)
+    for seed in seeds:
+        train, test = split_rows(len(data), 200, seed)
+        for hold in (False, True):
+            cal = jaxcal.calibrate_tree(robot, _rows(data, train), hold_undetermined=hold)
+            e = jaxcal.marker_errors(cal.robot, _rows(data, test)) * 1e3
+            print(
+                f"seed {seed}, undetermined {'held' if hold else 'fitted'}: held-out "
+                f"{e.mean():.2f} / {e.std():.2f} / {e.max():.2f} mm, {int(cal.fitted.sum())} "
+                f"fitted, {len(cal.not_determined)} not determined, converged {cal.converged}"
+            )
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2])
     ap.add_argument("--no-validate", action="store_true")
     ap.add_argument("--no-identify", action="store_true")
+    ap.add_argument("--hold-study", action="store_true")
     a = ap.parse_args()
+    if a.hold_study:
+        hold_study(a.seeds)
     if not a.no_identify:
         identify_times()
     if not a.no_validate:

@@ -236,6 +236,61 @@ def test_identification_recovers_simulated_truth(justin, data):
     assert cal.rms_mm < 1.2 * np.sqrt(3) * sigma * 1e3
     # Only springs with a gravity torque are determined: the vertical pan axis is not.
     assert "torso_1.k_theta" in cal.held
+    # A fitted spring whose std exceeds 10 % of its estimate is named as not determined
+    # by these data (no two-sided interval; a one-sided bound above the estimate).
+    rel = {n: cal.std[i] / abs(cal.estimate[i]) for i, n in enumerate(names_all(cal))}
+    springs = [n for n in names if n.endswith(".k_theta")]
+    loose = [n for n in springs if rel[n] > 0.1]
+    assert loose and set(loose) != set(springs)  # both kinds occur in this experiment
+    assert cal.not_determined == tuple(loose)
+    for n in springs:
+        assert (cal.interval95(n) is None) == (n in loose)
+    for n in loose:
+        i = names_all(cal).index(n)
+        b = cal.bound95(n)
+        if cal.estimate[i] > 0:  # the bound lies above the estimate, by 1.645 std
+            assert b is not None and b > cal.estimate[i] * cal.table[i].factor
+    # Held on request: at the nominal robot's values, refitted without them.
+    held = jaxcal.calibrate_tree(justin, sim, groups, hold_undetermined=True)
+    assert held.converged and set(loose) <= set(held.held)
+    assert set(held.not_determined) >= set(loose)
+    for n in held.not_determined:
+        assert held.interval95(n) is None
+    fitted = [i for i, p in enumerate(held.table) if held.fitted[i] and p.group.endswith("ance")]
+    assert all(held.std[i] <= 0.1 * abs(held.estimate[i]) for i in fitted)
+    nominal = np.asarray(get_vector(justin, held.table))
+    for n in loose:
+        i = names_all(held).index(n)
+        assert held.estimate[i] == nominal[i]
+
+
+def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
+    # The 120 rows and groups of the test above (its compiled program is reused).
+    rows = DATA.read_text().splitlines()[:121]
+    part = tmp_path / "justin120.csv"
+    part.write_text("\n".join(rows) + "\n")
+    args = ["identify", str(part), "--robot", "dlr_agile_justin"]
+    args += ["--params", "frames,joint-compliance"]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    flagged = out["not_determined"]
+    assert flagged and out["threshold"] == 0.1
+    for p in out["parameters"]:
+        loose = p["name"].endswith(".k_theta") and p["std"] > 0.1 * abs(p["value"])
+        assert p["not_determined"] == loose == (p["name"] in flagged), p
+        assert (p["ci95"] is None) == loose
+        if loose:
+            assert flagged[p["name"]]["held"] is False
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    first = next(iter(flagged))
+    assert f"{first} (not determined)" in text
+    assert f"{len(flagged)} springs, masses or spring-law constants are not determined" in text
+    assert "--hold-undetermined" in text
+
+
+def names_all(cal):
+    return [p.name for p in cal.table]
 
 
 def test_nominal_model_reproduces_published_error(justin, data):

@@ -88,6 +88,14 @@ def register(sub) -> None:
         "it is held at the robot file's value in the estimates and the saved robot)",
     )
     p.add_argument(
+        "--hold-undetermined",
+        action="store_true",
+        help="tree robots: hold the springs, masses and spring-law constants that are not "
+        "determined by these data at the robot file's values and fit again (by default "
+        "they stay fitted and are named: correlated springs can be determined together "
+        "though not one by one)",
+    )
+    p.add_argument(
         "--no-advice",
         action="store_true",
         help="do not compute the measurements that would determine such a parameter",

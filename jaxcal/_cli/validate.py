@@ -138,6 +138,8 @@ def run(args: argparse.Namespace) -> int:
                 "max_mm": float(np.max([s.max_mm for s in rows])),
                 "train_rms_mm": float(np.mean([s.train_rms_mm for s in rows])),
                 "fitted": int(rows[0].fitted),
+                # per fold: the fitted magnitudes its training rows do not determine
+                "not_determined": [list(f.not_determined) for f in rows],
                 "converged": all(s.converged for s in rows),
                 "published_mm": list(published[g]) if g in published else None,
             }
@@ -155,7 +157,16 @@ def run(args: argparse.Namespace) -> int:
             }
         )
         return 0 if all(s["converged"] for s in stages) else 1
-    head = ["+ group", "mean mm", "std mm", "max mm", "train rms mm", "fitted", "converged"]
+    head = [
+        "+ group",
+        "mean mm",
+        "std mm",
+        "max mm",
+        "train rms mm",
+        "fitted",
+        "not det.",
+        "converged",
+    ]
     if published:
         head += ["published mean/std/max"]
     table = []
@@ -167,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
             s["max_mm"],
             s["train_rms_mm"],
             s["fitted"],
+            max(len(f) for f in s["not_determined"]),
             "yes" if s["converged"] else "NO",
         ]
         if published:
@@ -178,6 +190,12 @@ def run(args: argparse.Namespace) -> int:
     print(
         format_table(head, [[round(v, 2) if isinstance(v, float) else v for v in r] for r in table])
     )
+    if any(any(f) for s in stages for f in s["not_determined"]):
+        print(
+            "not det.: fitted springs, masses or spring-law constants whose relative std "
+            "exceeds 10 % (the most over the folds); they stay fitted: together they shape "
+            "the predictions that the held-out errors measure (names in --json)"
+        )
     return 0 if all(s["converged"] for s in stages) else 1
 
 
@@ -198,10 +216,20 @@ def identify_tree(args: argparse.Namespace) -> int:
     robot, data = _load(args)
     groups = parse_groups(getattr(args, "params", None), robot)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
-    cal = calibrate_tree(robot, data, groups, hold=tuple(fix_names(args.fix)))
+    if not args.max_relative_std > 0:
+        raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
+    cal = calibrate_tree(
+        robot,
+        data,
+        groups,
+        hold=tuple(fix_names(args.fix)),
+        threshold=args.max_relative_std,
+        hold_undetermined=args.hold_undetermined,
+    )
     params = []
     for p, f, v, s in zip(cal.table, cal.fitted, cal.estimate, cal.std, strict=True):
         if f:
+            ci = cal.interval95(p.name)
             params.append(
                 {
                     "name": p.name,
@@ -209,8 +237,20 @@ def identify_tree(args: argparse.Namespace) -> int:
                     "value": float(v * p.factor),
                     "std": float(s * p.factor),
                     "unit": p.unit,
+                    "ci95": list(ci) if ci is not None else None,
+                    "not_determined": p.name in cal.not_determined,
                 }
             )
+    not_determined = {}
+    for n, (v, s) in zip(cal.not_determined, cal.free_values, strict=True):
+        factor = next(p.factor for p in cal.table if p.name == n)
+        not_determined[n] = {
+            "estimate": v * factor,
+            "std": s * factor,
+            "relative_std": s / abs(v) if v else float("inf"),
+            "upper_bound95": cal.bound95(n),
+            "held": n in cal.held,
+        }
     saved, unsaved = None, None
     if args.save_robot and cal.converged:
         calibration = {
@@ -221,6 +261,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             "rms_mm": cal.rms_mm,
             "parameters": params,
             "held": list(cal.held),
+            "not_determined": list(cal.not_determined),
         }
         try:
             if urdf_out:
@@ -244,21 +285,20 @@ def identify_tree(args: argparse.Namespace) -> int:
         "seconds": cal.seconds,
         "parameters": params,
         "held": list(cal.held),
+        "threshold": cal.threshold,
+        "not_determined": not_determined,
         "saved_robot": saved,
     }
     if args.json:
         print_json(summary)
     else:
-        print(
-            format_table(
-                ["parameter", "group", "estimate", "std", "unit"],
-                [[p["name"], p["group"], p["value"], p["std"], p["unit"]] for p in params],
-            )
-        )
+        print(format_table(_HEAD, [_row(p, not_determined) for p in params]))
         print(
             f"\n{len(params)} parameters fitted; held at the robot file's values (not "
             f"determined by these data, or redundant): {', '.join(cal.held) or 'none'}"
         )
+        if not_determined:
+            print(_not_determined_line(not_determined, cal.threshold, args.hold_undetermined))
         print(
             f"RMS 3-D marker error {cal.rms_mm:.3f} mm over {len(data)} rows; "
             f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"
@@ -281,6 +321,36 @@ def identify_tree(args: argparse.Namespace) -> int:
         print(f"jaxcal identify: error: {cal.message}", file=sys.stderr)
         return 1
     return 0
+
+
+_HEAD = ["parameter", "group", "estimate", "std", "95% low", "95% high", "unit"]
+
+
+def _row(p: dict, not_determined: dict) -> list:
+    if p["ci95"] is not None:
+        return [p["name"], p["group"], p["value"], p["std"], *p["ci95"], p["unit"]]
+    bound = not_determined.get(p["name"], {}).get("upper_bound95")
+    high = f"≤ {bound:.6g}" if bound is not None else "-"
+    return [f"{p['name']} (not determined)", p["group"], p["value"], p["std"], "-", high, p["unit"]]
+
+
+def _not_determined_line(not_determined: dict, threshold: float, held: bool) -> str:
+    names = ", ".join(not_determined)
+    what = (
+        f"{len(not_determined)} springs, masses or spring-law constants are not determined by "
+        f"these data (relative std above {threshold:g}): {names}. "
+    )
+    if held:
+        return what + (
+            "They are held at the robot file's values (their free fit's estimates and "
+            "one-sided 95 % bounds are in --json)."
+        )
+    return what + (
+        "They stay fitted, since together they still shape the predictions, but their "
+        "values are not to be read one by one (no two-sided interval; the table shows the "
+        "one-sided 95 % bound where the data give one); --hold-undetermined holds them at "
+        "the robot file's values."
+    )
 
 
 def simulate_tree(args: argparse.Namespace) -> int:

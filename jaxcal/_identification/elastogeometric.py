@@ -5,7 +5,12 @@ are fitted jointly by Levenberg–Marquardt through the static equilibrium under
 robot's own weight (`nonlinear_fit`). Which of them the data determine is decided from
 the data: QR with column pivoting of the σ-weighted Jacobian at the start (as FIGAROH
 does), each column scaled to the parameter's typical size; the columns it does not
-pick are named and held at the robot file's values.
+pick are named and held at the robot file's values. A fitted spring, mass or spring-law
+constant whose relative standard deviation exceeds `THRESHOLD` is flagged as *not
+determined by these data* (its value is not to be read on its own). Flagged parameters
+stay fitted unless `hold_undetermined`: on Agile Justin 40 of the 46 fitted springs are
+flagged individually, yet together they take the held-out error from 6.5 mm (held at the
+file's values) to 2.9 mm (`benchmarks/README.md`).
 
 Every fit of one robot and one data shape shares one compiled program: the fitted
 subset is a traced mask over the full parameter table, not a static choice.
@@ -34,6 +39,7 @@ from .parameter_groups import (
     parameter_table,
     set_vector,
 )
+from .result import THRESHOLD, Z95, Z95_ONE_SIDED
 
 __all__ = [
     "TreeCalibration",
@@ -51,6 +57,11 @@ __all__ = [
 #: (columns scaled to their parameter's typical size): a condition number of the fitted
 #: block of at most ~1e4.
 PIVOT_RCOND = 1e-4
+
+#: Groups whose parameters are physical magnitudes (a spring, a mass, a law's
+#: constant): their relative standard deviation says whether the data determine them.
+#: Frame and geometric parameters are errors about zero, decided by the pivoting alone.
+MAGNITUDE_GROUPS = ("joint-compliance", "lateral-compliance", "masses", "spring-laws")
 
 
 def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
@@ -115,6 +126,9 @@ class TreeCalibration(NamedTuple):
     - `estimate`, `std`: `(P,)` SI values and standard deviations (0 where held).
     - `rms_mm`: RMS 3-D marker error on the data, mm; `chi2`, `dof`.
     - `fit`: the raw `LsqFit`; `seconds`: wall time.
+    - `not_determined`: fitted magnitudes (`MAGNITUDE_GROUPS`) whose relative std
+      exceeds `threshold`, or that were held for it (`hold_undetermined`);
+      `free_values`: their estimate and std in the fit that had them free (SI).
     """
 
     robot: TreeRobot
@@ -129,10 +143,40 @@ class TreeCalibration(NamedTuple):
     message: str
     fit: LsqFit
     seconds: float
+    not_determined: tuple[str, ...] = ()
+    free_values: tuple[tuple[float, float], ...] = ()
+    threshold: float = THRESHOLD
 
     @property
     def held(self) -> tuple[str, ...]:
         return tuple(p.name for p, f in zip(self.table, self.fitted, strict=True) if not f)
+
+    def interval95(self, name: str) -> tuple[float, float] | None:
+        """The two-sided 95 % interval of a fitted parameter in its printed unit, or
+        `None` for one held or not determined by these data."""
+        i = [p.name for p in self.table].index(name)
+        if not self.fitted[i] or name in self.not_determined:
+            return None
+        p, v, s = self.table[i], self.estimate[i], self.std[i]
+        return float((v - Z95 * s) * p.factor), float((v + Z95 * s) * p.factor)
+
+    def bound95(self, name: str) -> float | None:
+        """One-sided 95 % upper bound (printed unit) of a parameter not determined by
+        these data, from the fit that had it free; `None` where the data give none
+        (the bound would not be positive)."""
+        k = self.not_determined.index(name)
+        p = self.table[[q.name for q in self.table].index(name)]
+        v, s = self.free_values[k]
+        b = v + Z95_ONE_SIDED * s
+        return float(b * p.factor) if np.isfinite(b) and b > 0 else None
+
+
+def _undetermined(table, fitted, est, std, threshold) -> list[int]:
+    return [
+        i
+        for i, p in enumerate(table)
+        if fitted[i] and p.group in MAGNITUDE_GROUPS and not std[i] <= threshold * abs(est[i])
+    ]
 
 
 def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
@@ -175,15 +219,42 @@ def calibrate_tree(
     hold: tuple[str, ...] = (),
     max_steps: int = 300,
     rcond: float = PIVOT_RCOND,
+    threshold: float = THRESHOLD,
+    hold_undetermined: bool = False,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
 
     `groups` (default: `default_groups(robot)`) is the parameter table the program is
     built for (keep it the same across fits to share one compilation); `hold` names
-    parameters to hold in any case. Never raises on a failed fit: see `converged` and
-    `message`.
+    parameters to hold in any case. Fitted magnitudes with a relative std above
+    `threshold` are named in `not_determined`; with `hold_undetermined` they are held
+    at the robot's values and the fit repeated (until none is left). Never raises on a
+    failed fit: see `converged` and `message`.
     """
+    if not threshold > 0:
+        raise ValueError(f"threshold must be positive, got {threshold}")
+    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond)
+    flagged: dict[str, tuple[float, float]] = {}
+    while True:
+        over = _undetermined(cal.table, cal.fitted, cal.estimate, cal.std, threshold)
+        for i in over:
+            flagged.setdefault(cal.table[i].name, (float(cal.estimate[i]), float(cal.std[i])))
+        if not over or not hold_undetermined:
+            break
+        hold = (*hold, *(cal.table[i].name for i in over))
+        seconds = cal.seconds
+        cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond)
+        cal = cal._replace(seconds=cal.seconds + seconds)
+    names = tuple(p.name for p in cal.table if p.name in flagged)
+    return cal._replace(
+        not_determined=names,
+        free_values=tuple(flagged[n] for n in names),
+        threshold=float(threshold),
+    )
+
+
+def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond) -> TreeCalibration:
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
     t0 = time.perf_counter()
@@ -257,7 +328,8 @@ def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
 
 class Stage(NamedTuple):
     """One row of a validation table: the groups fitted so far, and the held-out 3-D
-    marker errors (mm) after fitting them."""
+    marker errors (mm) after fitting them; `not_determined`: the fitted springs, masses
+    and spring-law constants the training rows do not determine one by one."""
 
     groups: tuple[str, ...]
     mean_mm: float
@@ -267,6 +339,7 @@ class Stage(NamedTuple):
     fitted: int
     converged: bool
     seconds: float
+    not_determined: tuple[str, ...] = ()
 
 
 def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -305,6 +378,7 @@ def validate_tree(
                 fitted=int(cal.fitted.sum()),
                 converged=cal.converged,
                 seconds=cal.seconds,
+                not_determined=cal.not_determined,
             )
         )
         if progress is not None:
