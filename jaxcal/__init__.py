@@ -194,6 +194,7 @@ from .design import (
     DesignCriteria as DesignCriteria,
     DesignProblem as DesignProblem,
     advise_measurements as advise_measurements,
+    advise_tree as advise_tree,
     constraint_values as constraint_values,
     design_bound as design_bound,
     design_bounds as design_bounds,

@@ -202,11 +202,11 @@ def test_pivoted_subset_drops_exact_redundancy():
     assert not (chosen[0] and chosen[2] and chosen[4])
 
 
-def test_identification_recovers_simulated_truth(justin, data):
+@pytest.fixture(scope="module")
+def simulated(justin, data):
     """Markers simulated by a robot with known springs and a shifted camera frame, with
-    0.2 mm noise; frames and joint compliances fitted from the nominal robot. Each
-    estimate must lie within 4.5 of its standard errors of the truth (for ~40 Gaussian
-    estimates the chance of a false alarm is below 3e-4)."""
+    0.2 mm noise on 120 poses; frames and joint compliances fitted from the nominal
+    robot: (truth, data, groups, calibration)."""
     truth = _soft(justin)
     # Only what is fitted differs from the nominal robot: joint springs, no lateral ones.
     truth = eqx.tree_at(lambda r: r.compliance, truth, truth.compliance.at[:, 1:].set(0.0))
@@ -216,14 +216,26 @@ def test_identification_recovers_simulated_truth(justin, data):
         truth.world + jnp.array([0.01, -0.02, 0.005, 0.002, -0.001, 0.003]),
     )
     sub = data.subset(np.arange(120))
-    y, _ = jaxcal.predicted_markers(truth, sub)
-    sigma = 2e-4
-    noisy = y + np.random.default_rng(7).normal(size=y.shape) * sigma
-    sim = jaxcal.MarkerData(
-        q=sub.q, markers=noisy, seen=sub.seen, sigma=np.full(len(sub), sigma), ids=sub.ids
-    )
+    sim = _measure(truth, sub.q, sub.seen, seed=7)
     groups = ("frames", "joint-compliance")
-    cal = jaxcal.calibrate_tree(justin, sim, groups)
+    return truth, sim, groups, jaxcal.calibrate_tree(justin, sim, groups)
+
+
+SIGMA = 2e-4  # m, the simulated noise
+
+
+def _measure(truth, q, seen, seed):
+    plan = jaxcal.MarkerData(q=q, markers=None, seen=seen, sigma=np.full(len(q), SIGMA))
+    y, _ = jaxcal.predicted_markers(truth, plan)
+    noisy = y + np.random.default_rng(seed).normal(size=y.shape) * SIGMA
+    return jaxcal.MarkerData(q=q, markers=noisy, seen=seen, sigma=np.full(len(q), SIGMA))
+
+
+def test_identification_recovers_simulated_truth(justin, simulated):
+    """Each estimate must lie within 4.5 of its standard errors of the truth (for ~40
+    Gaussian estimates the chance of a false alarm is below 3e-4)."""
+    truth, sim, groups, cal = simulated
+    sigma = SIGMA
     assert cal.converged, cal.message
     from jaxcal.internal import get_vector  # noqa: PLC0415
 
@@ -264,6 +276,45 @@ def test_identification_recovers_simulated_truth(justin, data):
         assert held.estimate[i] == nominal[i]
 
 
+def test_advised_rows_simulated_and_added_determine_the_springs(justin, simulated):
+    # The advice for the springs the 120 rows leave undetermined: poses within the joint
+    # limits, all markers seen. Measured (simulated by the true robot, fresh noise) and
+    # added, the fit determines every one of them.
+    truth, sim, groups, cal = simulated
+    # The wrist springs see so little torque that their relative std is 100-1000 %:
+    # 5000 rows within the limits do not bring them to 10 %, and the advice says so.
+    whole = jaxcal.advise_tree(cal, sim)
+    assert whole.targets == cal.not_determined and not whole.reached
+    assert whole.lines()[0].startswith("advice: no plan of at most 5000 absolute measurement")
+    assert whole.n_rows == 5000 and all(whole.after[n] < whole.before[n] for n in whole.targets)
+    # Those within a factor of 2 of the threshold (the shoulders): determined by the
+    # advised rows.
+    rel = {n: cal.std[i] / abs(cal.estimate[i]) for i, n in enumerate(names_all(cal))}
+    targets = tuple(n for n in cal.not_determined if rel[n] <= 0.2)
+    assert len(targets) >= 3
+    advice = jaxcal.advise_tree(cal, sim, targets)
+    assert advice.kind == "absolute" and advice.reached and advice.targets == targets
+    assert all(advice.before[n] > 0.1 and advice.after[n] <= 0.08 for n in advice.targets)
+    lo, hi = np.asarray(justin.joint_limits).T
+    assert np.all((advice.q >= lo) & (advice.q <= hi))
+    lines = advice.lines()
+    assert lines[0].startswith(f"advice: {advice.n_rows} more absolute measurement rows")
+    assert len(lines) == 1 + len(advice.rows) and "force" not in "".join(lines)
+    q = np.repeat(advice.q, advice.rows, axis=0)
+    extra = _measure(truth, q, np.ones((len(q), len(justin.marker_names)), bool), seed=8)
+    both = jaxcal.MarkerData(
+        q=np.concatenate([sim.q, extra.q]),
+        markers=np.concatenate([sim.markers, extra.markers]),
+        seen=np.concatenate([sim.seen, extra.seen]),
+        sigma=np.concatenate([sim.sigma, extra.sigma]),
+    )
+    again = jaxcal.calibrate_tree(justin, both, groups)
+    assert again.converged and not set(targets) & set(again.not_determined)
+    for n in advice.targets:
+        i = names_all(again).index(n)
+        assert again.fitted[i] and again.std[i] <= 0.1 * abs(again.estimate[i]), n
+
+
 def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
     # The 120 rows and groups of the test above (its compiled program is reused).
     rows = DATA.read_text().splitlines()[:121]
@@ -271,8 +322,9 @@ def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
     part.write_text("\n".join(rows) + "\n")
     args = ["identify", str(part), "--robot", "dlr_agile_justin"]
     args += ["--params", "frames,joint-compliance"]
-    assert main([*args, "--json"]) == 0
+    assert main([*args, "--json", "--no-advice"]) == 0
     out = json.loads(capsys.readouterr().out)
+    assert "advice" not in out
     flagged = out["not_determined"]
     assert flagged and out["threshold"] == 0.1
     for p in out["parameters"]:
@@ -287,6 +339,7 @@ def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
     assert f"{first} (not determined)" in text
     assert f"{len(flagged)} springs, masses or spring-law constants are not determined" in text
     assert "--hold-undetermined" in text
+    assert "more absolute measurement rows at these" in text  # the advice, computed
 
 
 def names_all(cal):

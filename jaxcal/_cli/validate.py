@@ -251,6 +251,12 @@ def identify_tree(args: argparse.Namespace) -> int:
             "upper_bound95": cal.bound95(n),
             "held": n in cal.held,
         }
+    advice = None
+    if cal.not_determined and cal.converged and not args.no_advice:
+        from ..design import advise_tree
+
+        print("computing the measurements that would determine them...", file=sys.stderr)
+        advice = advise_tree(cal, data)
     saved, unsaved = None, None
     if args.save_robot and cal.converged:
         calibration = {
@@ -289,6 +295,8 @@ def identify_tree(args: argparse.Namespace) -> int:
         "not_determined": not_determined,
         "saved_robot": saved,
     }
+    if advice is not None:
+        summary["advice"] = advice.to_dict()
     if args.json:
         print_json(summary)
     else:
@@ -299,6 +307,8 @@ def identify_tree(args: argparse.Namespace) -> int:
         )
         if not_determined:
             print(_not_determined_line(not_determined, cal.threshold, args.hold_undetermined))
+        if advice is not None:
+            print("\n".join(advice.lines()))
         print(
             f"RMS 3-D marker error {cal.rms_mm:.3f} mm over {len(data)} rows; "
             f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"

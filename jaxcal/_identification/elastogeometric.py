@@ -51,6 +51,7 @@ __all__ = [
     "marker_errors",
     "predicted_markers",
     "observations",
+    "scaled_jacobian",
 ]
 
 #: A pivoted column is kept while its R diagonal exceeds this fraction of the first's
@@ -80,6 +81,24 @@ def _predict(robot: TreeRobot, table, p, q, rows, markers):
 def _weighted_jacobian(robot, table, q, rows, markers, sigma, scale):
     _, _, J = _jacobian(robot, table, get_vector(robot, table), q, rows, markers)
     return (J * scale / sigma[:, None, None]).reshape(-1, scale.shape[0])
+
+
+def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: MarkerData) -> np.ndarray:
+    """Host-side: the σ-weighted Jacobian `(m, 3, P)` of the `m` seen marker positions of
+    `data` (row-major: row, then marker) in the parameters of `table`, each column in
+    units of its parameter's typical size (`Parameter.scale`), at `robot`'s values. A
+    plan without measurements (`markers=None`) works too."""
+    rows, markers = observations(data)
+    J = _weighted_jacobian(
+        robot,
+        table,
+        jnp.asarray(data.q),
+        rows,
+        markers,
+        jnp.asarray(np.asarray(data.sigma)[rows]),
+        jnp.asarray([p.scale for p in table]),
+    )
+    return np.asarray(J).reshape(len(rows), 3, len(table))
 
 
 def pivoted_subset(

@@ -9,6 +9,7 @@ from ._advice import (
     Advice as Advice,
     advise_measurements as advise_measurements,
 )
+from ._advice_tree import advise_tree as advise_tree
 from ._bound import (
     DesignBound as DesignBound,
     design_bound as design_bound,

@@ -60,6 +60,9 @@ class Advice:
     - `reached`: whether `after` is within `threshold` for every target; if not, no plan
       of at most `max_rows` rows in the box reaches it (`after` is the best found).
     - `sigma`: noise per coordinate of the advised rows, m.
+    - `kind`: `"deflection"` (loaded − unloaded rows, `force` the load) or
+      `"absolute"` (marker positions under the robot's own weight, `advise_tree`;
+      `q` then has the robot's joint count and `force` is zero).
     """
 
     targets: tuple[str, ...]
@@ -90,27 +93,31 @@ class Advice:
 
     def lines(self) -> list[str]:
         """The advice as the command line prints it."""
-        short = ", ".join(n.split("_")[0] for n in self.targets)
+        # "k2_urad_per_Nm" is said "k2"; a tree robot's names ("right_5.k_theta") as they are.
+        name = (lambda n: n.split("_")[0]) if self.kind == "deflection" else (lambda n: n)
+        short = ", ".join(name(n) for n in self.targets)
         pct = lambda d: ", ".join(
-            f"{n.split('_')[0]} {100 * v:.3g} %" if np.isfinite(v) else f"{n.split('_')[0]} ∞"
-            for n, v in d.items()
+            f"{name(n)} {100 * v:.3g} %" if np.isfinite(v) else f"{name(n)} ∞" for n, v in d.items()
         )
         limit = f"{100 * self.threshold:g} %"
+        kind = "deflection rows" if self.kind == "deflection" else "absolute measurement rows"
+        box = "experiment box" if self.kind == "deflection" else "joint limits"
         if not self.reached:
             return [
-                f"advice: no plan of at most {self.max_rows} deflection rows at poses in the "
-                f"robot's experiment box brings {short} to {limit} relative std (the best "
+                f"advice: no plan of at most {self.max_rows} {kind} at poses within the "
+                f"robot's {box} brings {short} to {limit} relative std (the best "
                 f"found, {self.n_rows} rows: {pct(self.after)})."
             ]
         out = [
-            f"advice: {self.n_rows} more deflection rows at these {len(self.rows)} poses "
-            f"(inside the robot's experiment box) bring {short} from {pct(self.before)} to "
+            f"advice: {self.n_rows} more {kind} at these {len(self.rows)} poses "
+            f"(within the robot's {box}) bring {short} from {pct(self.before)} to "
             f"{pct(self.after)} relative std (≤ {limit}):"
         ]
         for q, f, r in zip(np.rad2deg(self.q), self.force, self.rows, strict=True):
             ang = ", ".join(f"{a:.1f}" for a in q)
             load = ", ".join(f"{c:.0f}" for c in f)
-            out.append(f"  {int(r):4d} x  q = ({ang}) deg   force = ({load}) N")
+            where = f"  {int(r):4d} x  q = ({ang}) deg"
+            out.append(where + (f"   force = ({load}) N" if self.kind == "deflection" else ""))
         return out
 
     def to_dict(self) -> dict:
