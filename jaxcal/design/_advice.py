@@ -270,7 +270,9 @@ def advise_measurements(
     tj = jnp.asarray(target)
     while counts.sum() < max_rows:
         k = int(min(max(1, counts.sum() // 8), max_rows - counts.sum()))
-        score = np.asarray(_scores(jnp.asarray(M + prior), Acj, float(k), tj))
+        # The count as an array: a Python number would be static, one compile per value.
+        copies = jnp.asarray(k, Acj.dtype)
+        score = np.asarray(_scores(jnp.asarray(M + prior), Acj, copies, tj))
         i = int(np.argmin(score))
         if not np.isfinite(score[i]):
             break

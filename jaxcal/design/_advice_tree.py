@@ -116,12 +116,14 @@ def advise_tree(
     counts = np.zeros(pool, int)
     while counts.sum() < max_rows:
         step = int(min(max(1, counts.sum() // 8), max_rows - counts.sum()))
-        score = np.asarray(_scores(C, Acj, float(step), target, size2))
+        # The count as an array: a Python number would be static, one compile per value.
+        copies = jnp.asarray(step, Acj.dtype)
+        score = np.asarray(_scores(C, Acj, copies, target, size2))
         i = int(np.argmin(score))
         if not np.isfinite(score[i]):
             break
         counts[i] += step
-        C = _update(C, Acj[i], float(step))
+        C = _update(C, Acj[i], copies)
         if score[i] <= goal:
             break
     after = rel(C)
