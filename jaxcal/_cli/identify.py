@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
         inputs={"the data file": args.data, "the robot file": args.robot},
         overwrite=args.overwrite_input,
     )
+    if not args.max_relative_std > 0:
+        raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
     if is_tree_file(args.robot):
         from .validate import identify_tree
 
@@ -136,8 +138,6 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.outlier_threshold <= 0:
         raise ValueError(f"--outlier-threshold must be positive, got {args.outlier_threshold}")
-    if not args.max_relative_std > 0:
-        raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)

@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     from .._format import format_table
     from .._identification.elastogeometric import split_rows, validate_tree
     from .._identification.parameter_groups import parse_groups
+    from .._identification.result import THRESHOLD
 
     robot, data = _load(args)
     groups = parse_groups(args.params, robot)
@@ -193,8 +194,9 @@ def run(args: argparse.Namespace) -> int:
     if any(any(f) for s in stages for f in s["not_determined"]):
         print(
             "not det.: fitted springs, masses or spring-law constants whose relative std "
-            "exceeds 10 % (the most over the folds); they stay fitted: together they shape "
-            "the predictions that the held-out errors measure (names in --json)"
+            f"exceeds {100 * THRESHOLD:g} % (the most over the folds); they stay fitted: "
+            "together they shape the predictions that the held-out errors measure (names "
+            "in --json)"
         )
     return 0 if all(s["converged"] for s in stages) else 1
 
@@ -204,6 +206,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._format import format_table
     from .._identification.elastogeometric import calibrate_tree
     from .._identification.parameter_groups import parse_groups
+    from .._identification.result import relative_std
     from .._io import atomic_file
     from .._model.tree import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path
@@ -216,8 +219,6 @@ def identify_tree(args: argparse.Namespace) -> int:
     robot, data = _load(args)
     groups = parse_groups(getattr(args, "params", None), robot)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
-    if not args.max_relative_std > 0:
-        raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
     cal = calibrate_tree(
         robot,
         data,
@@ -247,7 +248,7 @@ def identify_tree(args: argparse.Namespace) -> int:
         not_determined[n] = {
             "estimate": v * factor,
             "std": s * factor,
-            "relative_std": s / abs(v) if v else float("inf"),
+            "relative_std": float(relative_std(v, s)),
             "upper_bound95": cal.bound95(n),
             "held": n in cal.held,
         }

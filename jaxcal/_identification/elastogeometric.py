@@ -39,7 +39,7 @@ from .parameter_groups import (
     parameter_table,
     set_vector,
 )
-from .result import THRESHOLD, Z95, Z95_ONE_SIDED
+from .result import THRESHOLD, Z95, relative_std, upper_bound95
 
 __all__ = [
     "TreeCalibration",
@@ -183,18 +183,17 @@ class TreeCalibration(NamedTuple):
         """One-sided 95 % upper bound (printed unit) of a parameter not determined by
         these data, from the fit that had it free; `None` where the data give none
         (the bound would not be positive)."""
-        k = self.not_determined.index(name)
         p = self.table[[q.name for q in self.table].index(name)]
-        v, s = self.free_values[k]
-        b = v + Z95_ONE_SIDED * s
-        return float(b * p.factor) if np.isfinite(b) and b > 0 else None
+        b = upper_bound95(*self.free_values[self.not_determined.index(name)])
+        return None if b is None else b * p.factor
 
 
 def _undetermined(table, fitted, est, std, threshold) -> list[int]:
+    rel = relative_std(est, std)
     return [
         i
         for i, p in enumerate(table)
-        if fitted[i] and p.group in MAGNITUDE_GROUPS and not std[i] <= threshold * abs(est[i])
+        if fitted[i] and p.group in MAGNITUDE_GROUPS and rel[i] > threshold
     ]
 
 

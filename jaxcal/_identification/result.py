@@ -25,11 +25,31 @@ __all__ = [
     "Z95",
     "free_mask",
     "make_result",
+    "relative_std",
     "resolve_name",
+    "upper_bound95",
 ]
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 Z95_ONE_SIDED = 1.6448536269514722  # one-sided 95 % normal quantile
+
+
+def relative_std(estimate, std) -> np.ndarray:
+    """Host-side `std / |estimate|` (`inf` where that is not finite: a zero estimate, a
+    std the data do not bound)."""
+    est, std = np.asarray(estimate, float), np.asarray(std, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = std / np.abs(est)
+    return np.where(np.isfinite(rel), rel, np.inf)
+
+
+def upper_bound95(estimate: float, std: float) -> float | None:
+    """One-sided 95 % upper bound `estimate + 1.645 std` of a parameter that is positive
+    by nature, or `None` where the data give none (not finite, or not positive: the
+    parameter's lower bound 0 says more)."""
+    bound = float(estimate) + Z95_ONE_SIDED * float(std)
+    return bound if np.isfinite(bound) and bound > 0 else None
+
 
 #: A parameter whose relative standard deviation exceeds this is *not determined by
 #: these data*: no two-sided interval is reported for it.
@@ -136,10 +156,7 @@ class IdentificationResult(eqx.Module):
     def relative_std(self) -> np.ndarray:
         """Host-side `std / |estimate|` of the fitted parameters (`inf` where the std is
         not finite)."""
-        est, std = np.asarray(self.estimate, float), np.asarray(self.std, float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel = std / np.abs(est)
-        return np.where(np.isfinite(rel), rel, np.inf)
+        return relative_std(self.estimate, self.std)
 
     def undetermined(self, limit: float | None = None) -> list[str]:
         """Names of the parameters not determined by these data: those flagged in
@@ -170,9 +187,7 @@ class IdentificationResult(eqx.Module):
         where it was free, or `None` where the data give none (a std that is not
         finite: the parameter is in the null space of the design). A positive parameter
         has the lower bound 0 whatever the data."""
-        v, s = self.free_value(name)
-        bound = v + Z95_ONE_SIDED * s
-        return bound if np.isfinite(bound) and bound > 0 else None
+        return upper_bound95(*self.free_value(name))
 
     def parameter(self, name: str) -> tuple[float, float]:
         """`(estimate, std)` of a parameter by name (`"k1"` or `"k1_urad_per_Nm"`)."""

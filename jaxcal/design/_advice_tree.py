@@ -32,15 +32,21 @@ from ._advice import Advice
 __all__ = ["advise_tree"]
 
 
+def _woodbury(C, a, copies):
+    # The rank-r update of the covariance C by `copies` of the rows a (r, p):
+    # C' = C - Bᵀ S⁻¹ B with B = a C and S = I/copies + a C aᵀ; returns B and S's factor.
+    B = a @ C
+    S = jnp.eye(a.shape[0], dtype=C.dtype) / copies + B @ a.T
+    return B, cholesky(0.5 * (S + S.T))
+
+
 @eqx.filter_jit
 def _scores(C, A, copies, target, size2):
     # Largest relative variance of the targets after `copies` of each candidate's rows
-    # (A: (N, r, p)), by the rank-r update of the covariance C (Woodbury).
+    # (A: (N, r, p)).
     def one(a):
-        B = a @ C
-        S = jnp.eye(a.shape[0], dtype=C.dtype) / copies + B @ a.T
-        X = cho_solve(cholesky(0.5 * (S + S.T)), B[:, target])
-        v = jnp.diagonal(C)[target] - jnp.sum(B[:, target] * X, axis=0)
+        B, L = _woodbury(C, a, copies)
+        v = jnp.diagonal(C)[target] - jnp.sum(B[:, target] * cho_solve(L, B[:, target]), axis=0)
         ok = jnp.all(jnp.isfinite(v))
         return jnp.where(ok, jnp.max(v / size2), jnp.inf)
 
@@ -49,9 +55,8 @@ def _scores(C, A, copies, target, size2):
 
 @eqx.filter_jit
 def _update(C, a, copies):
-    B = a @ C
-    S = jnp.eye(a.shape[0], dtype=C.dtype) / copies + B @ a.T
-    C = C - B.T @ cho_solve(cholesky(0.5 * (S + S.T)), B)
+    B, L = _woodbury(C, a, copies)
+    C = C - B.T @ cho_solve(L, B)
     return 0.5 * (C + C.T)
 
 
