@@ -134,6 +134,9 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
         2 * h
     )
     np.testing.assert_allclose(tangent, fd, rtol=1e-5, atol=1e-9)
+    # Reverse mode (what a calibration's Jacobian uses) transposes the same adjoint solve.
+    rev = jnp.einsum("ijk,jk->i", jax.jacrev(marker)(robot.compliance), direction)
+    np.testing.assert_allclose(rev, tangent, rtol=1e-8, atol=1e-12)
 
 
 def test_jit_vmap_consistency(justin, data):

@@ -59,6 +59,10 @@ __all__ = [
 #: block of at most ~1e4.
 PIVOT_RCOND = 1e-4
 
+#: Levenberg–Marquardt stops when a step changes every parameter by less than this, in
+#: units of its typical size (`Parameter.scale`: 1 mm, 1 mrad, 10 µrad/(N·m)).
+LM_TOL = 1e-6
+
 #: Groups whose parameters are physical magnitudes (a spring, a mass, a law's
 #: constant): their relative standard deviation says whether the data determine them.
 #: Frame and geometric parameters are errors about zero, decided by the pivoting alone.
@@ -222,9 +226,8 @@ def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
         mask=mask,
         jacobian=lambda p: _jacobian(robot, table, p, q, rows, markers),
         max_steps=max_steps,
-        # In units of each parameter's typical size (1 mm, 1 mrad, 10 µrad/(N·m)).
-        rtol=1e-6,
-        atol=1e-6,
+        rtol=LM_TOL,
+        atol=LM_TOL,
     )
 
 
