@@ -193,6 +193,7 @@ from .design import (
     DesignBound as DesignBound,
     DesignCriteria as DesignCriteria,
     DesignProblem as DesignProblem,
+    TaskPrediction as TaskPrediction,
     advise_measurements as advise_measurements,
     advise_tree as advise_tree,
     constraint_values as constraint_values,
@@ -211,6 +212,9 @@ from .design import (
     random_designs as random_designs,
     rank_random_designs as rank_random_designs,
     structured_design as structured_design,
+    task_information as task_information,
+    task_prediction as task_prediction,
+    task_value as task_value,
 )
 from .discrepancy import (
     CandidateResult as CandidateResult,

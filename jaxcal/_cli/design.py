@@ -179,6 +179,13 @@ def register(sub) -> None:
         "measurements of the same poses (loaded and unloaded, frame and geometry fitted "
         "alongside), beside the deflections' std",
     )
+    e.add_argument(
+        "--task",
+        metavar="TASK.csv",
+        help="the work the calibration is for: poses and process wrench per row (the "
+        "compensate path format); prints the RMS tool-point error the calibrated model "
+        "will leave on it (mm), from the physical parameters' predicted covariance",
+    )
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=run_evaluate)
 
@@ -494,10 +501,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
     crit["logdet_relative"] = float(rel.logdet)
     excluded = [n for n in robot.parameter_names if pset == "physical" and n not in rel.names]
     kinds = _absolute_vs_deflection(args.robot, data) if args.absolute else None
+    task = _task(robot, data, moment, args.task, model) if args.task else None
     if args.json:
         print_json(
             {
                 **({"absolute_vs_deflection": kinds} if kinds is not None else {}),
+                **({"task": task.to_dict()} if task is not None else {}),
                 "parameters": args.parameters,
                 "model": model,
                 "configs": len(data),
@@ -538,6 +547,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if feasible is not None:
         bad = {k: v for k, v in violations.items() if v}
         print(f"\nfeasible: {feasible}" + (f"  violated (rows): {bad}" if bad else ""))
+    if task is not None:
+        _print_task(task, args.task)
     if kinds is not None:
         print(
             f"\nthe same poses measured as deflections or as absolute positions "
@@ -554,6 +565,42 @@ def run_evaluate(args: argparse.Namespace) -> int:
             )
         )
     return 0
+
+
+def _task(robot, data, moment, path, model):
+    from .._io import read_dataset
+    from ..design._task import task_prediction
+
+    t = read_dataset(path, robot, require_deflection=False, ignore_deflection=True)
+    return task_prediction(
+        robot,
+        (data.q, data.force, moment),
+        (t.q, t.force, t.moment if t.has_moments else None),
+        sigma=data.sigma,
+        model=model,
+    )
+
+
+def _print_task(task, path) -> None:
+    n = task.row_std_mm.size
+    if task.undetermined:
+        print(
+            f"\ntask {path} ({n} rows): no bound on its error: the design does not "
+            f"determine {', '.join(u.split('_')[0] for u in task.undetermined)}, on which "
+            "the task depends"
+        )
+        return
+    print(
+        f"\ntask {path} ({n} rows): measured at these poses, the calibrated model leaves an "
+        f"RMS tool-point error of {task.rms_mm:.4g} mm on it (max row {task.row_std_mm.max():.4g} "
+        "mm): what compensation of this task will inherit"
+    )
+    print(
+        format_table(
+            ["parameter", "share of task variance"],
+            [[n.split("_")[0], f"{v:.3f}"] for n, v in task.share.items()],
+        )
+    )
 
 
 def _absolute_vs_deflection(robot_spec, data) -> dict:

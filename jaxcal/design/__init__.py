@@ -2,7 +2,8 @@
 parameters most precise. Constraints and loads, the covariance criteria (trace,
 determinant, weighted, explicit parameter lists) with autodiff gradients, the continuous
 constrained optimiser, the approximate-design bound and efficiency, and discrete plans
-(random, structured, the paper's Table 5); advice for parameters a data set does
+(random, structured, the paper's Table 5); the task criterion (the error a
+calibration leaves on the user's own poses and loads, in mm); advice for parameters a data set does
 not determine (which further rows, where, how many)."""
 
 from ._advice import (
@@ -41,4 +42,10 @@ from ._plans import (
     paper_to_jaxcal as paper_to_jaxcal,
     random_designs as random_designs,
     structured_design as structured_design,
+)
+from ._task import (
+    TaskPrediction as TaskPrediction,
+    task_information as task_information,
+    task_prediction as task_prediction,
+    task_value as task_value,
 )
