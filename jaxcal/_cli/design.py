@@ -50,7 +50,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--criterion",
-        choices=("trace", "det", "weighted"),
+        choices=("trace", "det", "weighted", "task"),
         default="trace",
         help="O1 trace, O2 determinant or O3 weighted sum of the covariance (default trace)",
     )
@@ -116,11 +116,27 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed, default=0, metavar="S", help="seed of the starts (0)")
     p.add_argument(
         "--pool",
-        type=int,
+        type=_pool,
         default=0,
-        metavar="N",
-        help="evaluate N random feasible designs first, start from the best, and report the "
-        "optimum's ratio to the best of them (0: random starts)",
+        metavar="N|CANDIDATES.csv",
+        help="a number N: evaluate N random feasible designs first, start from the best, and "
+        "report the optimum's ratio to the best of them (0: random starts). A data file: "
+        "choose --select K of its rows (measured or only planned) instead of optimising "
+        "poses, by Fedorov exchange for --criterion det, trace or task",
+    )
+    p.add_argument(
+        "--select",
+        type=int,
+        default=None,
+        metavar="K",
+        help="with --pool CANDIDATES.csv: how many of its rows to choose",
+    )
+    p.add_argument(
+        "--task",
+        metavar="TASK.csv",
+        default=None,
+        help="with --criterion task: the work the calibration is for (poses and process "
+        "wrench per row, the compensate path format)",
     )
     p.add_argument(
         "--bound-pool",
@@ -275,6 +291,14 @@ def _group_sizes(d) -> list[int]:
     return [int(np.sum(q2 == v)) for v in _level_values(d)]
 
 
+def _pool(text: str) -> int | str:
+    """`--pool`: a count of random designs, or a candidate file."""
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
 def run_design(args: argparse.Namespace) -> int:
     from .._io import write_dataset
     from .._robot import load_robot
@@ -282,6 +306,18 @@ def run_design(args: argparse.Namespace) -> int:
     from ..design._optimise import optimise_design
 
     check_output_path(args.output, "-o")
+    if isinstance(args.pool, str):
+        from .select import run_select
+
+        return run_select(args)
+    if args.select is not None:
+        raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
+    if args.criterion == "task":
+        raise ValueError(
+            "--criterion task chooses rows of a candidate file (--pool CANDIDATES.csv "
+            "--select K --task TASK.csv); for a given design, evaluate --task says its task "
+            "error"
+        )
     n, reps = _sizes(args)
     if args.starts < 1 or args.steps < 1 or args.pool < 0 or args.bound_pool < 0:
         raise ValueError("--starts and --steps must be positive, --pool and --bound-pool >= 0")

@@ -3,7 +3,8 @@ parameters most precise. Constraints and loads, the covariance criteria (trace,
 determinant, weighted, explicit parameter lists) with autodiff gradients, the continuous
 constrained optimiser, the approximate-design bound and efficiency, and discrete plans
 (random, structured, the paper's Table 5); the task criterion (the error a
-calibration leaves on the user's own poses and loads, in mm); advice for parameters a data set does
+calibration leaves on the user's own poses and loads, in mm); exact k-row subsets of a
+candidate file (Fedorov exchange) with their efficiency; advice for parameters a data set does
 not determine (which further rows, where, how many)."""
 
 from ._advice import (
@@ -42,6 +43,13 @@ from ._plans import (
     paper_to_jaxcal as paper_to_jaxcal,
     random_designs as random_designs,
     structured_design as structured_design,
+)
+from ._select import (
+    SELECT_CRITERIA as SELECT_CRITERIA,
+    PoolSelection as PoolSelection,
+    Selection as Selection,
+    select_from_pool as select_from_pool,
+    select_rows as select_rows,
 )
 from ._task import (
     TaskPrediction as TaskPrediction,

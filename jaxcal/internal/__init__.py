@@ -50,6 +50,7 @@ from ..design._criteria import criteria_from_observation as criteria_from_observ
 from ..design._observation import screw_jacobian as screw_jacobian
 from ..design._optimise import pool_values as pool_values
 from ..design._problem import problem_criteria as problem_criteria
+from ..design._select import pool_bound as pool_bound
 from ..discrepancy._heldout import (
     LEVERAGE_MAX as LEVERAGE_MAX,
     heldout_residuals as heldout_residuals,

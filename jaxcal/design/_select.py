@@ -1,0 +1,354 @@
+"""Exact k-row designs chosen from a pool of candidate rows: which of the rows of a data
+file (measured, or only planned) to measure.
+
+Each candidate row `c` carries its observation matrix `A_c` (`r × p`: 3 deflection
+coordinates, or every seen marker coordinate of a pose) and its noise `σ_c`; a subset
+`S` has the information `M(S) = Σ_{c∈S} A_cᵀ A_c / σ_c²` and the criteria
+
+- `det`: `log det M(S)⁻¹` (D-optimality);
+- `trace`: `trace(M(S)⁻¹)` of the columns as given (A-optimality; scale the columns to
+  choose the parameters' units, e.g. relative errors);
+- `task`: `trace(M(S)⁻¹ W)`, `W` the task's information (`task_information`): the mean
+  square error the calibration leaves on the task.
+
+**Method.** Greedy forward selection (each step the row that lowers the criterion most;
+a small ridge `ε I` stands in for the rows to come while `M` is still singular), then
+Fedorov's exchange: the best swap of a chosen row for a pool row, repeated while it
+improves the criterion by more than `tol` (relative). Every candidate swap is evaluated
+exactly, batched over the pool (host-side numpy, `p` ≲ 200): an exact k-subset, not a
+rounded approximate design.
+
+**Quality.** `pool_bound` is the approximate-design bound of the pool (as
+`design/_bound.py` for generated candidates: the multiplicative algorithm, rigorous at
+any iterate), so a selection is stated as its efficiency: `bound / value` for trace and
+task, `exp((bound − value)/p)` for det (D-efficiency).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import Dataset
+from .._robot import Robot
+from ._criteria import design_parameter_names, k1_identifiable, observe_jit
+from ._task import task_information
+
+__all__ = [
+    "SELECT_CRITERIA",
+    "Selection",
+    "select_rows",
+    "pool_bound",
+    "PoolSelection",
+    "select_from_pool",
+]
+
+SELECT_CRITERIA: tuple[str, ...] = ("det", "trace", "task")
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """A k-row subset of a pool: `rows` (pool indices, sorted), its criterion `value`,
+    `start_value` (after the greedy start), the number of `exchanges` made, and
+    `full_rank` (whether the chosen rows determine every parameter)."""
+
+    rows: np.ndarray
+    criterion: str
+    value: float
+    start_value: float
+    exchanges: int
+    full_rank: bool
+
+
+def _inverse(M: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """`(M⁻¹, log det M⁻¹)` by Cholesky, or `None` when `M` is not positive definite."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        return None
+    X = np.linalg.solve(L, np.eye(M.shape[0]))  # L⁻¹: M⁻¹ = XᵀX
+    return X.T @ X, -2.0 * float(np.sum(np.log(np.diagonal(L))))
+
+
+def _value(inv: tuple[np.ndarray, float], criterion: str, W: np.ndarray) -> float:
+    Minv, logdet = inv
+    return logdet if criterion == "det" else float(np.sum(Minv * W))
+
+
+def _with_rows(inv, criterion: str, W: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """The criterion of `M + A_cᵀ A_c` for every candidate `c` of `A` `(b, r, p)`, by the
+    rank-r updates of `M⁻¹` (Woodbury) and `log det` (the matrix determinant lemma)."""
+    Minv, logdet = inv
+    B = A @ Minv  # (b, r, p)
+    S = np.eye(A.shape[1]) + B @ A.transpose(0, 2, 1)
+    if criterion == "det":
+        return logdet - np.linalg.slogdet(S)[1]
+    T = (B @ W) @ B.transpose(0, 2, 1)
+    return float(np.sum(Minv * W)) - np.trace(np.linalg.solve(S, T), axis1=1, axis2=2)
+
+
+def select_rows(
+    obs: np.ndarray,
+    sigma: np.ndarray,
+    k: int,
+    *,
+    criterion: str = "det",
+    weight: np.ndarray | None = None,
+    start: np.ndarray | None = None,
+    tol: float = 1e-9,
+    max_exchanges: int = 1000,
+) -> Selection:
+    """The k rows of the pool `obs` `(n, r, p)` (noise `sigma` `(n,)`, same units as
+    `obs`'s rows) that minimise `criterion` (`SELECT_CRITERIA`; `weight` is the task's
+    `W` `(p, p)` for `"task"`), by greedy start (or the given `start` rows) and Fedorov
+    exchange (module docstring). Raises `ValueError` for bad arguments."""
+    obs = np.asarray(obs, float)
+    if obs.ndim != 3:
+        raise ValueError(f"obs must have shape (n, r, p), got {obs.shape}")
+    n, _, p = obs.shape
+    sigma = np.broadcast_to(np.asarray(sigma, float), (n,))
+    if criterion not in SELECT_CRITERIA:
+        raise ValueError(f"criterion must be one of {SELECT_CRITERIA}, got {criterion!r}")
+    if not 1 <= k <= n:
+        raise ValueError(f"k must be in 1..{n} (the pool's rows), got {k}")
+    W = None
+    if criterion == "task":
+        if weight is None or np.shape(weight) != (p, p):
+            raise ValueError(f"the task criterion needs weight (the task's W) of shape ({p}, {p})")
+        W = np.asarray(weight, float)
+    if not (np.all(np.isfinite(obs)) and np.all(sigma > 0)):
+        raise ValueError("obs must be finite and sigma positive")
+    # Per-row information, columns scaled to unit norm over the pool for conditioning
+    # (the criteria change by constants: det by a fixed term, trace/task with W scaled).
+    scale = np.linalg.norm(obs.reshape(-1, p) / np.repeat(sigma, obs.shape[1])[:, None], axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    A = obs / sigma[:, None, None] / scale[None, None, :]
+    Wd = None
+    if criterion == "trace":
+        Wd = np.diag(1.0 / scale**2)
+    elif W is not None:
+        Wd = W / np.outer(scale, scale)
+    info = np.einsum("nrp,nrq->npq", A, A)
+    Wd = np.eye(p) if Wd is None else Wd
+    # A tiny ridge keeps the base matrices invertible while the rows chosen so far do
+    # not determine every parameter; it stands for nothing once they do.
+    ridge = 1e-9 * np.trace(info.sum(0)) / p * np.eye(p)
+
+    if start is None:
+        chosen: list[int] = []
+        M = np.zeros((p, p))
+        for _ in range(k):
+            free = np.setdiff1d(np.arange(n), chosen)
+            base = _inverse(M + ridge)
+            assert base is not None
+            j = int(free[int(np.argmin(_with_rows(base, criterion, Wd, A[free])))])
+            chosen.append(j)
+            M = M + info[j]
+    else:
+        chosen = [int(i) for i in np.unique(np.asarray(start, int))]
+        if len(chosen) != k or min(chosen) < 0 or max(chosen) >= n:
+            raise ValueError(f"start must be {k} distinct pool rows")
+        M = info[chosen].sum(0)
+    full0 = _inverse(M + ridge)
+    assert full0 is not None
+    value = start_value = _value(full0, criterion, Wd)
+    exchanges = 0
+    for _ in range(max_exchanges):
+        free = np.setdiff1d(np.arange(n), chosen)
+        if free.size == 0:
+            break
+        best = (value, -1, -1)
+        for a, i in enumerate(chosen):
+            base = _inverse(M - info[i] + ridge)
+            if base is None:  # round-off of the downdate
+                continue
+            v = _with_rows(base, criterion, Wd, A[free])
+            j = int(np.argmin(v))
+            if v[j] < best[0]:
+                best = (float(v[j]), a, int(free[j]))
+        gain = value - best[0]
+        # det is a logarithm: an absolute gain; trace and task: relative to the value.
+        if best[1] < 0 or not gain > tol * (1.0 if criterion == "det" else abs(value)):
+            break
+        _, a, j = best
+        M = M - info[chosen[a]] + info[j]
+        chosen[a] = j
+        exchanges += 1
+        again = _inverse(M + ridge)
+        assert again is not None
+        value = _value(again, criterion, Wd)  # afresh: no drift of the updates
+    exact = _inverse(M)
+    full = exact is not None and bool(np.linalg.cond(M) < 1e12)
+    return Selection(
+        rows=np.sort(np.asarray(chosen, int)),
+        criterion=criterion,
+        value=_unscale(_value(exact, criterion, Wd), criterion, scale)
+        if full and exact is not None
+        else float("inf"),
+        start_value=_unscale(start_value, criterion, scale),
+        exchanges=exchanges,
+        full_rank=full,
+    )
+
+
+def _unscale(value: float, criterion: str, scale: np.ndarray) -> float:
+    # det: log det M⁻¹ of the scaled columns − 2 Σ log scale is the unscaled one;
+    # trace and task were computed with W in the scaled columns: already unscaled.
+    if criterion == "det":
+        return value - 2.0 * float(np.sum(np.log(scale)))
+    return value
+
+
+def pool_bound(
+    obs: np.ndarray,
+    sigma: np.ndarray,
+    k: int,
+    *,
+    criterion: str = "det",
+    weight: np.ndarray | None = None,
+    steps: int = 2000,
+) -> float:
+    """A lower bound on the criterion of every k-row subset of the pool (`select_rows`'
+    arguments): the pool's approximate optimum, by the multiplicative algorithm
+    `w_c ← w_c (d_c/φ)^λ`, bounded at the last iterate by the equivalence theorem (trace
+    and task: `φ²/max d / k`; det: `φ + p log(p/max d) − p log k`)."""
+    obs = np.asarray(obs, float)
+    n, _, p = obs.shape
+    sigma = np.broadcast_to(np.asarray(sigma, float), (n,))
+    A = obs / sigma[:, None, None]
+    scale = np.linalg.norm(A.reshape(-1, p), axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    A = A / scale
+    if criterion == "det":
+        W = None
+    elif criterion == "trace":
+        W = np.diag(1.0 / scale**2)
+    else:
+        if weight is None:
+            raise ValueError("the task criterion needs weight (the task's W)")
+        W = np.asarray(weight, float) / np.outer(scale, scale)
+    w = np.full(n, 1.0 / n)
+    for _ in range(steps):
+        M = np.einsum("n,nrp,nrq->pq", w, A, A)
+        inv = _inverse(M)
+        if inv is None:
+            return float("-inf")
+        Minv, logdet = inv
+        B = A @ Minv  # (n, r, p)
+        if W is None:
+            phi, d = logdet, np.einsum("nrp,nrp->n", B, A)
+            w = w * d / p
+        else:
+            phi = float(np.sum(Minv * W))
+            d = np.einsum("nrp,pq,nrq->n", B, W, B, optimize=True)
+            w = w * np.sqrt(d / phi)
+        w = w / w.sum()
+    dmax = float(d.max())
+    if W is None:
+        return phi + p * np.log(p / dmax) - p * np.log(k) - 2.0 * float(np.sum(np.log(scale)))
+    return phi**2 / dmax / k
+
+
+@dataclasses.dataclass(frozen=True)
+class PoolSelection:
+    """`select_from_pool`'s answer: the `selection`, the parameters it is about
+    (`names`), the pool's `bound` and the selection's `efficiency` against it (1 is the
+    best any k rows of the pool could do), and the criterion of `random` k-row subsets
+    of the pool (`random_subsets` of them, seeded) for comparison."""
+
+    selection: Selection
+    names: tuple[str, ...]
+    bound: float
+    efficiency: float
+    random: np.ndarray
+
+    def to_dict(self) -> dict:
+        s = self.selection
+        finite = self.random[np.isfinite(self.random)]
+        return {
+            "rows": [int(i) + 1 for i in s.rows],
+            "criterion": s.criterion,
+            "value": s.value,
+            "bound": self.bound,
+            "efficiency": self.efficiency,
+            "exchanges": s.exchanges,
+            "full_rank": s.full_rank,
+            "parameters": list(self.names),
+            "random_median": float(np.median(self.random)) if self.random.size else None,
+            "random_full_rank": int(finite.size),
+            "random_subsets": int(self.random.size),
+        }
+
+
+def _efficiency(criterion: str, value: float, bound: float, p: int) -> float:
+    if not np.isfinite(value):
+        return 0.0
+    if criterion == "det":
+        return float(np.exp((bound - value) / p))
+    return float(bound / value)
+
+
+def select_from_pool(
+    robot: Robot,
+    pool: Dataset,
+    k: int,
+    *,
+    criterion: str = "det",
+    task: Dataset | None = None,
+    model: str = "full",
+    random_subsets: int = 200,
+    seed: int = 0,
+) -> PoolSelection:
+    """Host-side: the `k` rows of a FANUC-form data file `pool` (its poses and loads;
+    deflections, if any, ignored) to measure for the physical parameters (k1 when some
+    load excites it), by `criterion`: `"det"`, `"trace"` (of the relative errors, as
+    `design_criteria` for the physical set) or `"task"` (`task`: the poses and process
+    wrenches the calibration is for). With its efficiency against the pool's bound and
+    the criterion of `random_subsets` random k-row subsets."""
+    if criterion == "task" and task is None:
+        raise ValueError("the task criterion needs the task's rows (task=...)")
+    q = jnp.asarray(pool.q)
+    moment = pool.moment if pool.has_moments else None
+    k1 = k1_identifiable(pool.force, moment)
+    names = design_parameter_names(robot, "physical", include_k1=k1)
+    obs, nominal = observe_jit(robot, q, pool.force, moment, "physical", None, None, k1, model)
+    obs, nominal = np.asarray(obs), np.asarray(nominal)
+    sigma = np.asarray(pool.sigma)
+    W = None
+    if criterion == "trace":
+        obs = obs * nominal  # relative errors
+    elif criterion == "task":
+        assert task is not None
+        t_obs, _ = observe_jit(
+            robot,
+            jnp.asarray(task.q),
+            task.force,
+            task.moment if task.has_moments else None,
+            "physical",
+            None,
+            None,
+            k1,
+            model,
+        )
+        W = np.asarray(task_information(t_obs))
+    sel = select_rows(obs, sigma, k, criterion=criterion, weight=W)
+    bound = pool_bound(obs, sigma, k, criterion=criterion, weight=W)
+    rng = np.random.default_rng(seed)
+    rand = np.array(
+        [
+            select_rows(
+                obs,
+                sigma,
+                k,
+                criterion=criterion,
+                weight=W,
+                start=rng.choice(len(pool), k, replace=False),
+                max_exchanges=0,
+            ).value
+            for _ in range(random_subsets)
+        ]
+    )
+    p = obs.shape[-1]
+    return PoolSelection(sel, names, bound, _efficiency(criterion, sel.value, bound, p), rand)
