@@ -1,93 +1,70 @@
-"""A matrix-free lineax solver for systems `A x = b` with `A = s (I − M)`, `s = ±1` and
-`M` a contraction: Richardson's iteration `x ← x + s (b − A x)`, i.e. the Neumann series
-of `(I − M)⁻¹`.
+"""Matrix-free solves of `(I − M) x = b` for a contraction `M`: Richardson's iteration
+`x ← b + M x`, i.e. the Neumann series of `(I − M)⁻¹`, and the implicit derivative of a
+fixed point built on it.
 
-Why: the static equilibrium of a robot is the fixed point `φ = φ − F(φ)` of a map that
+Why: the static equilibrium of a robot is the fixed point `φ = g(φ)` of a map that
 contracts fast (the springs are stiff against the load's own stiffness), and its
-implicit derivative solves `A x = b` with `A = −(I + C ∂²V/∂φ²)` (optimistix writes the
-fixed point `g(φ) = φ` as the root of `g(φ) − φ`: `s = −1`, `M = −C ∂²V/∂φ²`). A direct solver
-first materialises that matrix, one Jacobian-vector product per spring deflection (57
-for Agile Justin), at every pose and every Levenberg–Marquardt step. The same
-contraction that makes the forward iteration converge in a few steps makes this one
-converge in as many products, for any number of springs. Reverse mode transposes it
-into the same iteration on `Aᵀ` (vector-Jacobian products).
+derivative solves `(I − ∂g/∂φ) φ̇ = ∂g/∂θ θ̇`. A direct solver first materialises
+`∂g/∂φ`, one Jacobian-vector product per spring deflection (57 for Agile Justin), at
+every pose and every Levenberg–Marquardt step; the same contraction that makes the
+forward iteration converge in a few steps makes this one converge in as many products.
 
-It does not converge when the iteration does not contract (a spring so soft that the
-robot buckles under its own weight). The forward fixed-point iteration has failed
-first in that case, and its `converged = False` flags the point, so the solver returns
-its last iterate as a result rather than an error: lineax raises on any unsuccessful
-tangent solve, and a Levenberg–Marquardt trial step at such a point must not end the
-fit (with a direct solver the derivative there would be as meaningless, and as
-harmless).
+`implicit_solve` wraps it in `jax.lax.custom_linear_solve`, so forward mode iterates
+Jacobian-vector products and reverse mode vector-Jacobian products (JAX transposes it
+through the given transposed solve). Unlike lineax's `linear_solve` inside optimistix's
+implicit adjoint, it compiles to no host callback (lineax raises from a tangent solve
+through one), and programs with a host callback are never written to JAX's persistent
+compilation cache.
+
+A run that does not converge within `max_steps` (a map that does not contract: a
+spring so soft that the robot buckles under its own weight) returns its last iterate.
+The forward iteration has failed first in that case, and its flag marks the point.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
+from jaxtyping import Array
 
-__all__ = ["Richardson"]
-
-
-def _norm(tree) -> jax.Array:
-    leaves = jax.tree_util.tree_leaves(tree)
-    return jnp.sqrt(sum(jnp.sum(x * x) for x in leaves))
+__all__ = ["richardson", "implicit_solve"]
 
 
-class Richardson(lx.AbstractLinearSolver):
-    """lineax solver for square `A = sign · (I − M)`, `‖M‖ < 1`, never materialising `A`:
-    iterate `x ← x + sign · (b − A x)` from `x = sign · b` until
-    `‖b − A x‖ ≤ atol + rtol ‖b‖`, at most `max_steps` times (`stats["converged"]` says
-    whether it got there; see the module docstring for why that is not an error).
-    `Aᵀ = sign · (I − Mᵀ)` has the same sign, so the transposed solve (reverse mode) is
-    the same iteration."""
+def richardson(
+    apply_m: Callable[[Array], Array], b: Array, *, rtol: float, max_steps: int = 64
+) -> Array:
+    """`x = (I − M)⁻¹ b` by `x ← b + M x` from `x = b`, until a step changes `x` by at
+    most `rtol ‖b‖` or after `max_steps` steps; `apply_m(v) = M v`."""
+    bound = rtol * jnp.sqrt(jnp.sum(b * b))
 
-    rtol: float
-    atol: float
-    sign: float = eqx.field(static=True, default=1.0)
-    max_steps: int = eqx.field(static=True, default=64)
+    def cond(carry):
+        step, _, change = carry
+        return (step < max_steps) & (change > bound)
 
-    def __check_init__(self):
-        if self.sign not in (1.0, -1.0):
-            raise ValueError(f"sign must be 1 or -1, got {self.sign}")
+    def body(carry):
+        step, x, _ = carry
+        new = b + apply_m(x)
+        return step + 1, new, jnp.sqrt(jnp.sum((new - x) ** 2))
 
-    def init(self, operator: lx.AbstractLinearOperator, options: dict[str, Any]):
-        del options
-        if operator.in_structure() != operator.out_structure():
-            raise ValueError("Richardson needs a square operator (same in and out structure)")
-        return operator
+    _, x, _ = jax.lax.while_loop(cond, body, (jnp.array(0), b, jnp.asarray(jnp.inf, b.dtype)))
+    return x
 
-    def compute(self, state, vector, options):
-        del options
-        operator = state
-        bound = self.atol + self.rtol * _norm(vector)
 
-        def residual(x):
-            return jax.tree_util.tree_map(lambda b, ax: b - ax, vector, operator.mv(x))
-
-        def cond(carry):
-            step, _, r = carry
-            return (step < self.max_steps) & (_norm(r) > bound)
-
-        def body(carry):
-            step, x, r = carry
-            x = jax.tree_util.tree_map(lambda x, r: x + self.sign * r, x, r)
-            return step + 1, x, residual(x)
-
-        x0 = jax.tree_util.tree_map(lambda b: self.sign * b, vector)
-        step, x, r = jax.lax.while_loop(cond, body, (jnp.array(0), x0, residual(x0)))
-        return x, lx.RESULTS.successful, {"num_steps": step, "converged": _norm(r) <= bound}
-
-    def transpose(self, state, options):
-        return state.transpose(), options
-
-    def conj(self, state, options):
-        # Real operators only (everything in this package is real).
-        return state, options
-
-    def assume_full_rank(self) -> bool:
-        return True
+def implicit_solve(
+    jvp_m: Callable[[Array], Array],
+    vjp_m: Callable[[Array], Array],
+    b: Array,
+    *,
+    rtol: float,
+    max_steps: int = 64,
+) -> Array:
+    """`(I − M)⁻¹ b`, differentiable and transposable: `jvp_m(v) = M v` and
+    `vjp_m(v) = Mᵀ v` (a fixed point's `∂g/∂φ` and its transpose)."""
+    return jax.lax.custom_linear_solve(
+        lambda v: v - jvp_m(v),
+        b,
+        solve=lambda _, rhs: richardson(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
+        transpose_solve=lambda _, rhs: richardson(vjp_m, rhs, rtol=rtol, max_steps=max_steps),
+    )

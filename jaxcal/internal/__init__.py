@@ -37,7 +37,7 @@ from .._linalg.covariance import (
     unidentifiable as unidentifiable,
     well_conditioned as well_conditioned,
 )
-from .._linalg.iterative import Richardson as Richardson
+from .._linalg.iterative import implicit_solve as implicit_solve, richardson as richardson
 from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
