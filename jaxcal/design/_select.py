@@ -89,6 +89,35 @@ def _with_rows(inv, criterion: str, W: np.ndarray, A: np.ndarray) -> np.ndarray:
     return float(np.sum(Minv * W)) - np.trace(np.linalg.solve(S, T), axis1=1, axis2=2)
 
 
+def _prepared(obs, sigma, criterion: str, weight):
+    """Checked arguments as the algorithms use them: `A` `(n, r, p)` the rows over σ with
+    each column scaled to unit norm over the pool (for conditioning), the `scale`, and
+    the criterion's weight matrix in the scaled columns (`I` for det, unused)."""
+    obs = np.asarray(obs, float)
+    if obs.ndim != 3:
+        raise ValueError(f"obs must have shape (n, r, p), got {obs.shape}")
+    n, _, p = obs.shape
+    sigma = np.broadcast_to(np.asarray(sigma, float), (n,))
+    if criterion not in SELECT_CRITERIA:
+        raise ValueError(f"criterion must be one of {SELECT_CRITERIA}, got {criterion!r}")
+    if criterion == "task" and (weight is None or np.shape(weight) != (p, p)):
+        raise ValueError(f"the task criterion needs weight (the task's W) of shape ({p}, {p})")
+    if not (np.all(np.isfinite(obs)) and np.all(sigma > 0)):
+        raise ValueError("obs must be finite and sigma positive")
+    A = obs / sigma[:, None, None]
+    scale = np.linalg.norm(A.reshape(-1, p), axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    # The criteria change by constants: det by a fixed term, trace and task not at all
+    # with W scaled alike (`_unscale`).
+    if criterion == "trace":
+        W = np.diag(1.0 / scale**2)
+    elif criterion == "task":
+        W = np.asarray(weight, float) / np.outer(scale, scale)
+    else:
+        W = np.eye(p)
+    return A / scale, scale, W
+
+
 def select_rows(
     obs: np.ndarray,
     sigma: np.ndarray,
@@ -104,34 +133,11 @@ def select_rows(
     `obs`'s rows) that minimise `criterion` (`SELECT_CRITERIA`; `weight` is the task's
     `W` `(p, p)` for `"task"`), by greedy start (or the given `start` rows) and Fedorov
     exchange (module docstring). Raises `ValueError` for bad arguments."""
-    obs = np.asarray(obs, float)
-    if obs.ndim != 3:
-        raise ValueError(f"obs must have shape (n, r, p), got {obs.shape}")
-    n, _, p = obs.shape
-    sigma = np.broadcast_to(np.asarray(sigma, float), (n,))
-    if criterion not in SELECT_CRITERIA:
-        raise ValueError(f"criterion must be one of {SELECT_CRITERIA}, got {criterion!r}")
+    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    n, _, p = A.shape
     if not 1 <= k <= n:
         raise ValueError(f"k must be in 1..{n} (the pool's rows), got {k}")
-    W = None
-    if criterion == "task":
-        if weight is None or np.shape(weight) != (p, p):
-            raise ValueError(f"the task criterion needs weight (the task's W) of shape ({p}, {p})")
-        W = np.asarray(weight, float)
-    if not (np.all(np.isfinite(obs)) and np.all(sigma > 0)):
-        raise ValueError("obs must be finite and sigma positive")
-    # Per-row information, columns scaled to unit norm over the pool for conditioning
-    # (the criteria change by constants: det by a fixed term, trace/task with W scaled).
-    scale = np.linalg.norm(obs.reshape(-1, p) / np.repeat(sigma, obs.shape[1])[:, None], axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    A = obs / sigma[:, None, None] / scale[None, None, :]
-    Wd = None
-    if criterion == "trace":
-        Wd = np.diag(1.0 / scale**2)
-    elif W is not None:
-        Wd = W / np.outer(scale, scale)
     info = np.einsum("nrp,nrq->npq", A, A)
-    Wd = np.eye(p) if Wd is None else Wd
     # A tiny ridge keeps the base matrices invertible while the rows chosen so far do
     # not determine every parameter; it stands for nothing once they do.
     ridge = 1e-9 * np.trace(info.sum(0)) / p * np.eye(p)
@@ -214,21 +220,9 @@ def pool_bound(
     arguments): the pool's approximate optimum, by the multiplicative algorithm
     `w_c ← w_c (d_c/φ)^λ`, bounded at the last iterate by the equivalence theorem (trace
     and task: `φ²/max d / k`; det: `φ + p log(p/max d) − p log k`)."""
-    obs = np.asarray(obs, float)
-    n, _, p = obs.shape
-    sigma = np.broadcast_to(np.asarray(sigma, float), (n,))
-    A = obs / sigma[:, None, None]
-    scale = np.linalg.norm(A.reshape(-1, p), axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    A = A / scale
-    if criterion == "det":
-        W = None
-    elif criterion == "trace":
-        W = np.diag(1.0 / scale**2)
-    else:
-        if weight is None:
-            raise ValueError("the task criterion needs weight (the task's W)")
-        W = np.asarray(weight, float) / np.outer(scale, scale)
+    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    n, _, p = A.shape
+    W = None if criterion == "det" else Wd
     w = np.full(n, 1.0 / n)
     for _ in range(steps):
         M = np.einsum("n,nrp,nrq->pq", w, A, A)
