@@ -28,19 +28,19 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._io import Dataset
 from .._robot import Robot
-from ._criteria import design_parameter_names, k1_identifiable, observe_jit
-from ._task import task_information
+from ._criteria import design_parameter_names, k1_identifiable
+from ._task import observe_physical, task_information
 
 __all__ = [
     "SELECT_CRITERIA",
     "Selection",
     "select_rows",
     "pool_bound",
+    "subset_values",
     "PoolSelection",
     "select_from_pool",
 ]
@@ -207,6 +207,27 @@ def _unscale(value: float, criterion: str, scale: np.ndarray) -> float:
     return value
 
 
+def subset_values(
+    obs: np.ndarray,
+    sigma: np.ndarray,
+    subsets: list[np.ndarray],
+    *,
+    criterion: str = "det",
+    weight: np.ndarray | None = None,
+) -> np.ndarray:
+    """The criterion of each row subset of the pool (`select_rows`' arguments; `inf`
+    where a subset does not determine every parameter), the pool prepared once."""
+    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    info = np.einsum("nrp,nrq->npq", A, A)
+    out = np.full(len(subsets), np.inf)
+    for i, rows in enumerate(subsets):
+        M = info[np.asarray(rows)].sum(0)
+        inv = _inverse(M)
+        if inv is not None and np.linalg.cond(M) < 1e12:  # as `select_rows`' full_rank
+            out[i] = _unscale(_value(inv, criterion, Wd), criterion, scale)
+    return out
+
+
 def pool_bound(
     obs: np.ndarray,
     sigma: np.ndarray,
@@ -303,46 +324,25 @@ def select_from_pool(
     the criterion of `random_subsets` random k-row subsets."""
     if criterion == "task" and task is None:
         raise ValueError("the task criterion needs the task's rows (task=...)")
-    q = jnp.asarray(pool.q)
     moment = pool.moment if pool.has_moments else None
     k1 = k1_identifiable(pool.force, moment)
     names = design_parameter_names(robot, "physical", include_k1=k1)
-    obs, nominal = observe_jit(robot, q, pool.force, moment, "physical", None, None, k1, model)
-    obs, nominal = np.asarray(obs), np.asarray(nominal)
+    obs, nominal = (
+        np.asarray(a) for a in observe_physical(robot, pool.q, pool.force, moment, k1, model)
+    )
     sigma = np.asarray(pool.sigma)
     W = None
     if criterion == "trace":
         obs = obs * nominal  # relative errors
     elif criterion == "task":
         assert task is not None
-        t_obs, _ = observe_jit(
-            robot,
-            jnp.asarray(task.q),
-            task.force,
-            task.moment if task.has_moments else None,
-            "physical",
-            None,
-            None,
-            k1,
-            model,
-        )
+        t_moment = task.moment if task.has_moments else None
+        t_obs, _ = observe_physical(robot, task.q, task.force, t_moment, k1, model)
         W = np.asarray(task_information(t_obs))
     sel = select_rows(obs, sigma, k, criterion=criterion, weight=W)
     bound = pool_bound(obs, sigma, k, criterion=criterion, weight=W)
     rng = np.random.default_rng(seed)
-    rand = np.array(
-        [
-            select_rows(
-                obs,
-                sigma,
-                k,
-                criterion=criterion,
-                weight=W,
-                start=rng.choice(len(pool), k, replace=False),
-                max_exchanges=0,
-            ).value
-            for _ in range(random_subsets)
-        ]
-    )
+    subsets = [rng.choice(len(pool), k, replace=False) for _ in range(random_subsets)]
+    rand = subset_values(obs, sigma, subsets, criterion=criterion, weight=W)
     p = obs.shape[-1]
     return PoolSelection(sel, names, bound, _efficiency(criterion, sel.value, bound, p), rand)

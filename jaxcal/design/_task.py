@@ -35,7 +35,13 @@ from ._criteria import (
     observe_jit,
 )
 
-__all__ = ["TaskPrediction", "task_information", "task_value", "task_prediction"]
+__all__ = [
+    "TaskPrediction",
+    "task_information",
+    "task_value",
+    "task_prediction",
+    "observe_physical",
+]
 
 
 def task_information(obs: Float[Array, "n 3 p"]) -> Float[Array, "p p"]:
@@ -88,7 +94,10 @@ class TaskPrediction:
         }
 
 
-def _observe(robot, q, force, moment, include_k1, model):
+def observe_physical(robot, q, force, moment, include_k1: bool, model: str):
+    """Host-side: observation matrices `(m, 3, p)` and nominal values of the physical
+    parameters at rows `q` (rad) with loads `force`, `moment` (N, N·m; `moment` may be
+    None), as the task criterion and the pool selection use them."""
     return observe_jit(
         robot, jnp.asarray(q), jnp.asarray(force), moment, "physical", None, None, include_k1, model
     )
@@ -120,13 +129,13 @@ def task_prediction(
     kept = list(range(0 if k1 else 1, len(all_names)))
     cols = np.asarray(kept)
     names = tuple(all_names[i] for i in kept)
-    obs, nominal = _observe(robot, *design, True, model)
+    obs, nominal = observe_physical(robot, *design, True, model)
     crit = criteria_from_observation(
         obs[:, :, cols], nominal[cols], sig, names=names, relative=False
     )
     # The task's sensitivity to every physical parameter: one the design leaves out (k1)
     # or cannot determine, and the task needs, makes the prediction unbounded.
-    t_obs, _ = _observe(robot, *task, True, model)
+    t_obs, _ = observe_physical(robot, *task, True, model)
     t_obs = np.asarray(t_obs)
     need = np.sqrt(np.mean(np.sum(t_obs**2, axis=1), axis=0))  # RMS sensitivity per column
     left_out = [
