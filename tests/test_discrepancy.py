@@ -33,6 +33,9 @@ from jaxcal.internal import THETA_REF, URAD, chi2_sf, press
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# The study's fits run long: compiled with LLVM's optimisations on (tests/conftest.py).
+pytestmark = pytest.mark.usefixtures("optimised_programs")
+
 
 def _study_module():
     spec = importlib.util.spec_from_file_location(
