@@ -212,6 +212,13 @@ class TreeEquilibrium(eqx.Module):
 _ADJOINT_RTOL = 1e-10
 
 
+# Traced once per robot structure and argument shapes, then reused: the residual (the
+# gradient of the potential through the whole tree) is the largest piece of every
+# program around the equilibrium, and the fixed point, its implicit derivative, the
+# convergence check and the fits' Jacobians all call it. Inside an outer trace this jit
+# is a call JAX caches by its arguments' structure (its transforms reuse the one
+# jaxpr) and XLA inlines, so it costs neither compile nor run time.
+@eqx.filter_jit
 def _residual(phi, args):
     robot, q, force, moment, at = args
     compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
