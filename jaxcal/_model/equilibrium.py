@@ -332,6 +332,9 @@ def implicit_step(
 FAILED_DEFLECTION = 1.0
 
 
+# Jitted so that its trace is cached: a fit evaluates it for the residual and again
+# under the JVPs of the Jacobian, with the same shapes (an inner jit is inlined by XLA).
+@eqx.filter_jit
 def measured_deflections(
     robot: Robot,
     q_all: Float[Array, "m 6"],
