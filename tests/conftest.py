@@ -91,13 +91,28 @@ def _release_compiled_programs():
         gc.collect()
 
 
+@contextlib.contextmanager
+def _optimisations_on():
+    before = jax.config.values["jax_disable_most_optimizations"]
+    jax.config.update("jax_disable_most_optimizations", False)
+    try:
+        yield
+    finally:
+        jax.config.update("jax_disable_most_optimizations", before)
+
+
 @pytest.fixture(scope="module")
 def optimised_programs():
     """LLVM's optimisations on for a test file's compiles (see the top of this file)."""
-    before = jax.config.values["jax_disable_most_optimizations"]
-    jax.config.update("jax_disable_most_optimizations", False)
-    yield
-    jax.config.update("jax_disable_most_optimizations", before)
+    with _optimisations_on():
+        yield
+
+
+@pytest.fixture
+def optimised_test():
+    """LLVM's optimisations on for one test's compiles: one whose programs run long."""
+    with _optimisations_on():
+        yield
 
 
 DATA = Path(__file__).parent / "data"

@@ -121,6 +121,7 @@ def _rmse_ratio(a, b):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("optimised_test")  # its fits run long
 def test_default_design_proven_by_repeated_experiments(robot, default_design):
     # Simulated experiments per design, nonlinear fit on the full model (k1 held: vertical
     # loads), sigma = 0.02 mm, 500 trials: the first 500 of the 2000-trial study in

@@ -217,6 +217,7 @@ def _errors(robot, table, rng, which) -> jaxcal.TreeRobot:
     return set_vector(robot, table, jnp.asarray(p0 + which * rng.normal(size=p0.shape) * size))
 
 
+@pytest.mark.usefixtures("optimised_test")  # its fits run long
 def test_ur5_calibrated_from_its_urdf_recovers_the_truth_within_its_std():
     """Sixty poses, two markers, 0.05 mm noise, 20 noise seeds. The truth differs from
     the URDF's nominal robot in the parameters the data determine (those the
