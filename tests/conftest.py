@@ -16,14 +16,15 @@ from pathlib import Path
 # optimisations off (JAX's `jax_disable_most_optimizations`) compile the same programs in
 # 40 % of the time (the task criterion's tests: 35 s to 14 s) and give the same numbers
 # to round-off. Those programs run slower (the discrepancy fits about 4 times): a test
-# file whose programs run long turns the optimisations back on with the
-# `optimised_programs` fixture. Set before JAX creates its CPU client; the workers,
-# notebook kernels and subprocesses inherit it. A user's programs keep XLA's defaults;
+# file or a test whose programs run long turns the optimisations back on with the
+# `optimised_programs` or `optimised_test` fixture. Set before JAX creates its CPU
+# client; the workers, notebook kernels and subprocesses inherit it (and, importing this
+# file again, find it set). A user's programs keep XLA's defaults;
 # JAXCAL_TEST_XLA_DEFAULTS=1 runs the suite with them.
+_LOOP_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 if os.environ.get("JAXCAL_TEST_XLA_DEFAULTS") != "1":
-    os.environ["XLA_FLAGS"] = (
-        f"{os.environ.get('XLA_FLAGS', '')} --xla_cpu_use_fusion_emitters=false".strip()
-    )
+    if _LOOP_EMITTERS not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_LOOP_EMITTERS}".strip()
     os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = "1"
 
 import jax  # noqa: E402

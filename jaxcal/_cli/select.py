@@ -69,14 +69,15 @@ def _report(args, out, d) -> None:
     )
     rows = [int(r) for r in d["rows"]]
     print(f"rows (1-based): {', '.join(map(str, rows))}")
-    value = d["value"] * (1e6 if crit == "task" else 1.0)
-    bound = d["bound"] * (1e6 if crit == "task" else 1.0)
+    to_unit = 1e6 if crit == "task" else 1.0  # the task's m² printed in mm²
     median = d["random_median"]
-    median = None if median is None else median * (1e6 if crit == "task" else 1.0)
     table = [
-        ["chosen rows", value],
-        ["bound (any rows of the pool)", bound],
-        [f"median of {d['random_subsets']} random subsets", median],
+        ["chosen rows", d["value"] * to_unit],
+        ["bound (any rows of the pool)", d["bound"] * to_unit],
+        [
+            f"median of {d['random_subsets']} random subsets",
+            None if median is None else median * to_unit,
+        ],
     ]
     print(format_table(["criterion", "value"], table))
     print(

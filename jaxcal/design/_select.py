@@ -72,6 +72,13 @@ def _inverse(M: np.ndarray) -> tuple[np.ndarray, float] | None:
     return X.T @ X, -2.0 * float(np.sum(np.log(np.diagonal(L))))
 
 
+def _determined(M: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """`_inverse(M)` where the rows behind `M` determine every parameter (condition
+    number below 1e12), else `None`."""
+    inv = _inverse(M)
+    return inv if inv is not None and np.linalg.cond(M) < 1e12 else None
+
+
 def _value(inv: tuple[np.ndarray, float], criterion: str, W: np.ndarray) -> float:
     Minv, logdet = inv
     return logdet if criterion == "det" else float(np.sum(Minv * W))
@@ -185,17 +192,16 @@ def select_rows(
         again = _inverse(M + ridge)
         assert again is not None
         value = _value(again, criterion, Wd)  # afresh: no drift of the updates
-    exact = _inverse(M)
-    full = exact is not None and bool(np.linalg.cond(M) < 1e12)
+    exact = _determined(M)
     return Selection(
         rows=np.sort(np.asarray(chosen, int)),
         criterion=criterion,
-        value=_unscale(_value(exact, criterion, Wd), criterion, scale)
-        if full and exact is not None
-        else float("inf"),
+        value=float("inf")
+        if exact is None
+        else _unscale(_value(exact, criterion, Wd), criterion, scale),
         start_value=_unscale(start_value, criterion, scale),
         exchanges=exchanges,
-        full_rank=full,
+        full_rank=exact is not None,
     )
 
 
@@ -221,9 +227,8 @@ def subset_values(
     info = np.einsum("nrp,nrq->npq", A, A)
     out = np.full(len(subsets), np.inf)
     for i, rows in enumerate(subsets):
-        M = info[np.asarray(rows)].sum(0)
-        inv = _inverse(M)
-        if inv is not None and np.linalg.cond(M) < 1e12:  # as `select_rows`' full_rank
+        inv = _determined(info[np.asarray(rows)].sum(0))
+        if inv is not None:
             out[i] = _unscale(_value(inv, criterion, Wd), criterion, scale)
     return out
 
