@@ -19,30 +19,40 @@ def _spd(rng, n):
     return A @ A.T + n * np.eye(n)
 
 
+@jax.jit
+def _factorisations(S, A, b, M, c):
+    # Every factorisation of one example in one compiled program (one compile per size;
+    # op by op, each operation of each size is compiled on its own).
+    L = D.cholesky(S)
+    lu, perm = D.lu_factor(A)
+    H = A + A.T
+    return dict(
+        L=L,
+        cho=D.cho_solve(L, b),
+        lu=D.lu_solve(lu, perm, b),
+        lu_t=D.lu_solve(lu, perm, b, trans=True),
+        lstsq=D.lstsq_qr(M, c),
+        eig=D.eigvalsh(H),
+        pd=D.is_positive_definite(H),
+    )
+
+
 @settings(max_examples=10, deadline=None)
 @given(n=sizes, seed=seeds)
 def test_factorisations_match_lapack(n, seed):
     rng = np.random.default_rng(seed)
     S, A, b = _spd(rng, n), rng.normal(size=(n, n)) + n * np.eye(n), rng.normal(size=n)
-    L = np.asarray(D.cholesky(jnp.asarray(S)))
-    np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-12, atol=1e-12)
-    x = D.cho_solve(jnp.asarray(L), jnp.asarray(b))
-    np.testing.assert_allclose(x, np.linalg.solve(S, b), rtol=1e-9, atol=1e-12)
-    lu, perm = D.lu_factor(jnp.asarray(A))
-    np.testing.assert_allclose(D.lu_solve(lu, perm, jnp.asarray(b)), np.linalg.solve(A, b), 1e-9)
-    np.testing.assert_allclose(
-        D.lu_solve(lu, perm, jnp.asarray(b), trans=True), np.linalg.solve(A.T, b), 1e-9
-    )
     M = rng.normal(size=(3 * n + 1, n))
     c = rng.normal(size=3 * n + 1)
-    np.testing.assert_allclose(
-        D.lstsq_qr(jnp.asarray(M), jnp.asarray(c)), np.linalg.lstsq(M, c, rcond=None)[0], 1e-8
-    )
+    out = _factorisations(*(jnp.asarray(x) for x in (S, A, b, M, c)))
+    np.testing.assert_allclose(out["L"], np.linalg.cholesky(S), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out["cho"], np.linalg.solve(S, b), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(out["lu"], np.linalg.solve(A, b), 1e-9)
+    np.testing.assert_allclose(out["lu_t"], np.linalg.solve(A.T, b), 1e-9)
+    np.testing.assert_allclose(out["lstsq"], np.linalg.lstsq(M, c, rcond=None)[0], 1e-8)
     H = A + A.T
-    np.testing.assert_allclose(
-        D.eigvalsh(jnp.asarray(H)), np.linalg.eigvalsh(H), rtol=1e-10, atol=1e-10 * n
-    )
-    assert bool(D.is_positive_definite(jnp.asarray(H))) == bool(np.linalg.eigvalsh(H)[0] > 0)
+    np.testing.assert_allclose(out["eig"], np.linalg.eigvalsh(H), rtol=1e-10, atol=1e-10 * n)
+    assert bool(out["pd"]) == bool(np.linalg.eigvalsh(H)[0] > 0)
 
 
 def test_partial_pivoting_handles_a_zero_leading_entry():
@@ -76,6 +86,28 @@ def test_lineax_solvers_value_and_gradient(solver):
     np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-14)
 
 
+@jax.jit
+def _qr_both_ways(M, b, c):
+    # SmallQR and lx.QR side by side, in one compiled program per shape.
+    op = lx.MatrixLinearOperator(M)
+    ours, ref = D.SmallQR(), lx.QR()
+    s1, s2 = ours.init(op, {}), ref.init(op, {})
+    t1, t2 = ours.transpose(s1, {})[0], ref.transpose(s2, {})[0]
+
+    def loss(M, solver):
+        return jnp.sum(lx.linear_solve(lx.MatrixLinearOperator(M), b, solver).value ** 2)
+
+    return dict(
+        ours=ours.compute(s1, b, {})[0],
+        ref=ref.compute(s2, b, {})[0],
+        ours_t=ours.compute(t1, c, {})[0],
+        ref_t=ref.compute(t2, c, {})[0],
+        x=lx.linear_solve(op, b, D.SmallQR()).value,
+        g=jax.grad(loss)(M, D.SmallQR()),
+        g_ref=jax.grad(loss)(M, lx.QR()),
+    )
+
+
 @pytest.mark.parametrize("shape", [(9, 4), (4, 9), (5, 5)], ids=["tall", "wide", "square"])
 def test_small_qr_matches_lineax_qr_both_ways(shape):
     """Least squares (tall), minimum norm (wide), exact (square), and the transposed
@@ -84,20 +116,13 @@ def test_small_qr_matches_lineax_qr_both_ways(shape):
     rng = np.random.default_rng(4)
     M = jnp.asarray(rng.normal(size=shape))
     b, c = jnp.asarray(rng.normal(size=shape[0])), jnp.asarray(rng.normal(size=shape[1]))
-    op = lx.MatrixLinearOperator(M)
-    ours, ref = D.SmallQR(), lx.QR()
-    s1, s2 = ours.init(op, {}), ref.init(op, {})
-    np.testing.assert_allclose(ours.compute(s1, b, {})[0], ref.compute(s2, b, {})[0], 1e-10)
-    t1, t2 = ours.transpose(s1, {})[0], ref.transpose(s2, {})[0]
-    np.testing.assert_allclose(ours.compute(t1, c, {})[0], ref.compute(t2, c, {})[0], 1e-10)
-    x = lx.linear_solve(op, b, D.SmallQR()).value
-    np.testing.assert_allclose(x, np.linalg.lstsq(np.asarray(M), np.asarray(b), rcond=None)[0])
-
-    def loss(M, solver):
-        return jnp.sum(lx.linear_solve(lx.MatrixLinearOperator(M), b, solver).value ** 2)
-
-    g = jax.grad(loss)(M, D.SmallQR())
-    np.testing.assert_allclose(g, jax.grad(loss)(M, lx.QR()), rtol=1e-8, atol=1e-12)
+    out = _qr_both_ways(M, b, c)
+    np.testing.assert_allclose(out["ours"], out["ref"], 1e-10)
+    np.testing.assert_allclose(out["ours_t"], out["ref_t"], 1e-10)
+    np.testing.assert_allclose(
+        out["x"], np.linalg.lstsq(np.asarray(M), np.asarray(b), rcond=None)[0]
+    )
+    np.testing.assert_allclose(out["g"], out["g_ref"], rtol=1e-8, atol=1e-12)
 
 
 def test_vmap_equals_loop():
@@ -105,5 +130,7 @@ def test_vmap_equals_loop():
     S = jnp.asarray(np.stack([_spd(rng, 4) for _ in range(6)]))
     b = jnp.asarray(rng.normal(size=(6, 4)))
     batched = jax.jit(jax.vmap(lambda S, b: D.lu_solve(*D.lu_factor(S), b)))(S, b)
-    looped = jnp.stack([D.lu_solve(*D.lu_factor(s), v) for s, v in zip(S, b, strict=True)])
+    # The unbatched program, one example per call (compiled once: same shapes).
+    one = jax.jit(lambda S, b: D.lu_solve(*D.lu_factor(S), b))
+    looped = jnp.stack([one(s, v) for s, v in zip(S, b, strict=True)])
     np.testing.assert_allclose(batched, looped, rtol=1e-13)

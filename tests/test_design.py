@@ -4,6 +4,7 @@ and the `design`/`evaluate` commands."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 
 import jax
@@ -113,7 +114,6 @@ def test_gradient_matches_central_differences(robot, designs, kw):
     def logf(a):
         return jnp.log(design_objective(P, a))
 
-    g = np.asarray(jax.jit(jax.grad(logf))(q))
     # Directional central differences of the log-criterion along random directions (all
     # 36 angles at once) and along single angles. With h = 1e-5 rad the truncation error
     # (h² times third derivatives, ~1e-10) and the round-off (eps·|f|/h ~ 1e-11) are far
@@ -124,13 +124,17 @@ def test_gradient_matches_central_differences(robot, designs, kw):
     V[:3] = 0
     for k in range(3):
         V[k, rng.integers(6), rng.integers(6)] = 1.0
-    pts = jnp.concatenate([q + h * V, q - h * V])
-    vals = np.asarray(jax.jit(jax.vmap(logf))(pts))
+    # One compiled program gives the gradient at q and the values at the 12 points.
+    vals, grads = jax.jit(jax.vmap(jax.value_and_grad(logf)))(
+        jnp.concatenate([q[None], q + h * V, q - h * V])
+    )
+    g, vals = np.asarray(grads[0]), np.asarray(vals[1:])
     fd = (vals[:6] - vals[6:]) / (2 * h)
     exact = np.einsum("kij,ij->k", V, g)
     np.testing.assert_allclose(fd, exact, atol=1e-6 * np.linalg.norm(g))
 
 
+@pytest.mark.usefixtures("optimised_test")  # its second-order program runs long
 def test_full_model_criterion_value_and_gradient(robot, designs):
     # model="full": the observation equals jaxcal.observation_physical (same full
     # equilibrium model), and the criterion's gradient in q (second-order autodiff
@@ -238,13 +242,25 @@ def test_structured_and_paper_plans(robot):
     # The paper's plan in our convention: tests/test_paper_convention.py.
 
 
+@contextlib.contextmanager
+def _optimisations_on():
+    # XLA's optimisations on for a module fixture's compiles, as the `optimised_test`
+    # fixture does for a test's: for programs whose run takes longer than their compile.
+    before = jax.config.values["jax_disable_most_optimizations"]
+    jax.config.update("jax_disable_most_optimizations", False)
+    try:
+        yield
+    finally:
+        jax.config.update("jax_disable_most_optimizations", before)
+
+
 @pytest.fixture(scope="module")
 def optimised(robot):
     # The default problem (physical set linearised from the full model, relative trace,
     # vertical loads, k1 excluded), started from the best 4 of the 200 random feasible
     # designs it is compared with (seed 0: the `designs` fixture).
     # The physical set spends its trace on Kc, which it cannot determine: a warning says so.
-    with pytest.warns(UserWarning, match=r"Kc: 9\d % of the trace"):
+    with _optimisations_on(), pytest.warns(UserWarning, match=r"Kc: 9\d % of the trace"):
         return optimise_design(
             robot,
             12,
@@ -267,7 +283,8 @@ def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised
     # The reference: the best of the 200 random designs under the same (full-model)
     # criterion, the best one re-evaluated through `design_criteria`'s own path.
     P = DesignProblem(robot, 12, parameters="physical")
-    rand = np.asarray(pool_values(P, jnp.asarray(designs)))
+    with _optimisations_on():  # the program the fixture compiled for its pool, reused
+        rand = np.asarray(pool_values(P, jnp.asarray(designs)))
     assert d.random_best == pytest.approx(rand.min(), rel=1e-12)
     F = _vertical(robot, 12)
     best_random = design_criteria(robot, designs[int(np.argmin(rand))], F, parameters="physical")

@@ -129,7 +129,7 @@ def test_equilibrium_is_a_stationary_stable_minimum(robot, rows):
 def test_equilibrium_potential_is_minimal_nearby(robot, rows):
     q, F = rows
     sol, _, _ = _equilibria(robot, q, F)
-    U = jax.vmap(lambda x, a, b: jaxcal.total_potential(robot, a, x, b))
+    U = jax.jit(jax.vmap(lambda x, a, b: jaxcal.total_potential(robot, a, x, b)))
     U0 = np.asarray(U(sol.x, q, F))
     rng = np.random.default_rng(2)
     for _ in range(3):

@@ -418,9 +418,10 @@ sys.exit(main())
 """
 
 
-def start(script, *args, cwd):
+def spawn(script, *args, cwd):
+    """The process, started; `running(proc)` waits until it has imported jaxcal."""
     env = {**os.environ, "JAXCAL_CACHE_DIR": "off"}
-    proc = subprocess.Popen(
+    return subprocess.Popen(
         [sys.executable, "-c", script, *map(str, args)],
         env=env,
         cwd=cwd,
@@ -429,9 +430,16 @@ def start(script, *args, cwd):
         text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
+
+
+def running(proc):
     assert proc.stderr is not None
     assert proc.stderr.readline() == "running\n"
     return proc
+
+
+def start(script, *args, cwd):
+    return running(spawn(script, *args, cwd=cwd))
 
 
 def ended(proc, timeout=60):
@@ -483,7 +491,10 @@ def test_ctrl_c_stops_every_long_command_at_once(command, data_dir, tmp_path):
         folder.mkdir()
         args = long_command(command, data_dir, folder)
         before.append({p.name: p.read_bytes() for p in folder.iterdir()})
-        procs.append(start(PROCESS, *args, cwd=folder))
+        procs.append(spawn(PROCESS, *args, cwd=folder))
+    # Both import JAX at once; the moments count from when both are running.
+    for proc in procs:
+        running(proc)
     t0 = time.monotonic()
     for proc, after in zip(procs, AFTER_S, strict=True):
         time.sleep(max(0.0, t0 + after - time.monotonic()))

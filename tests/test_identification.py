@@ -117,9 +117,10 @@ def _calibration_plan(robot):
     return jaxcal.Dataset.from_arrays(q_rows, f_rows, sigma_mm=sigma_mm)
 
 
-def test_monte_carlo_nonlinear_unbiased(robot):
-    # 4 true robots × 50 noise seeds = 200 trials, all fitted in ONE vmapped, jitted
-    # call (one compilation, one batch) with the preset as the starting point.
+@pytest.fixture(scope="module")
+def nonlinear_trials(robot):
+    """4 true robots × 50 noise seeds = 200 noisy deflection sets of the calibration
+    plan, with the true parameters of each (simulated before the optimised fit below)."""
     data = _calibration_plan(robot)
     truths = _truths(robot, 4, seed=1)
     sig = np.asarray(data.sigma)[:, None]
@@ -130,7 +131,14 @@ def test_monte_carlo_nonlinear_unbiased(robot):
         noise = sig * jax.random.normal(jax.random.fold_in(key, i), (50, len(data), 3))
         D.append(d0 + noise)
         P.append(np.tile(np.asarray(jaxcal.get_parameters(t)), (50, 1)))
-    D, P = jnp.concatenate(D), np.concatenate(P)
+    return data, jnp.concatenate(D), np.concatenate(P)
+
+
+def test_monte_carlo_nonlinear_unbiased(robot, nonlinear_trials, optimised_test):
+    # All 200 trials fitted in ONE vmapped, jitted call (one compilation, one batch)
+    # with the preset as the starting point. Running the batch takes longer than
+    # compiling it: LLVM's optimisations on.
+    data, D, P = nonlinear_trials
     fit = jax.jit(jax.vmap(lambda d: fit_nonlinear(robot, data.with_deflection(d))))
     res = jax.tree_util.tree_map(np.asarray, fit(D))
     _check_unbiased_and_coverage(res.estimate, res.std, res.converged, P, res.names)
@@ -193,15 +201,23 @@ def test_predictor_jacobian_matches_implicit_adjoint_and_fd(robot, example):
     data, _ = example
     sub = data.subset(slice(0, 6))
     predictor = full_model_predictor(robot, sub)
-    pred = jax.jit(lambda p: predictor(p)[0])  # one compile for all FD evaluations
+    # One compiled program gives both the forward-mode derivatives (unit tangents at p0:
+    # the columns of jacfwd) and the values for the central differences (zero tangents
+    # at p0 ± h·e_i), in one batched call.
+    jvp = jax.jit(jax.vmap(lambda p, v: jax.jvp(lambda x: predictor(x)[0], (p,), (v,))))
     p0 = jaxcal.get_parameters(robot)
-    J = jax.jit(jax.jacfwd(pred))(p0)
+    n, cols = p0.size, (0, 1, 6, 7)
+    h = jnp.array([1e-4 * float(p0[i]) for i in cols])
+    steps = jnp.eye(n)[jnp.array(cols)] * h[:, None]
+    P = jnp.concatenate([jnp.broadcast_to(p0, (n, n)), p0 + steps, p0 - steps])
+    V = jnp.concatenate([jnp.eye(n), jnp.zeros((2 * len(cols), n))])
+    values, tangents = jvp(P, V)
+    J = jnp.moveaxis(tangents[:n], 0, -1)
     ref = jaxcal.observation_physical(robot, sub)
     np.testing.assert_allclose(J, ref, rtol=1e-7, atol=1e-12 * float(jnp.abs(ref).max()))
-    for i in (0, 1, 6, 7):
-        h = 1e-4 * float(p0[i])
-        e = jnp.zeros_like(p0).at[i].set(h)
-        fd = (pred(p0 + e) - pred(p0 - e)) / (2 * h)
+    plus, minus = values[n : n + len(cols)], values[n + len(cols) :]
+    for k, i in enumerate(cols):
+        fd = (plus[k] - minus[k]) / (2 * h[k])
         # central FD error O(h²·d³Δp/dp³) ~ 1e-8 relative; round-off ~1e-16/1e-4
         np.testing.assert_allclose(
             fd, J[..., i], rtol=1e-5, atol=1e-6 * float(jnp.abs(J[..., i]).max())
@@ -325,7 +341,7 @@ def test_method_init_once_then_fit_equals_identify(robot, example, method):
         return  # its vmap/loop equality is test_vmap_equals_loop's
     rng = np.random.default_rng(1)
     D = data.deflection + 2e-5 * rng.normal(size=(3, *data.deflection.shape))
-    batch = jax.vmap(method.fit, in_axes=(None, 0))(state, D)
+    batch = jax.jit(jax.vmap(method.fit, in_axes=(None, 0)))(state, D)
     for i in range(3):
         np.testing.assert_allclose(batch.estimate[i], fit(state, D[i]).estimate, rtol=1e-10)
 

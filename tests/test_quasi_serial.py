@@ -47,13 +47,17 @@ def fanuc():
     return _pair()
 
 
-def _tree_fn(tree):
-    def one(q, f, m):
-        dp, ok = jaxcal.tree_deflection(tree, q, f, m, at="tool")
-        eq = jaxcal.tree_equilibrium(tree, q, force=f, moment=m, at="tool")
-        return dp, jaxcal.link_angles(tree, q, eq.phi) - q, ok & eq.converged
+@eqx.filter_jit
+def _tree_eval(tree, q, f, m):
+    dp, ok = jaxcal.tree_deflection(tree, q, f, m, at="tool")
+    eq = jaxcal.tree_equilibrium(tree, q, force=f, moment=m, at="tool")
+    return dp, jaxcal.link_angles(tree, q, eq.phi) - q, ok & eq.converged
 
-    return jax.jit(one)
+
+def _tree_fn(tree):
+    # One compiled program per robot structure: the tests of one robot (and a robot
+    # read back from its file) share it.
+    return lambda q, f, m: _tree_eval(tree, q, f, m)
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +65,7 @@ def tree_fn(fanuc):
     return _tree_fn(fanuc[1])
 
 
-def test_reference_deflections(fanuc):
+def test_reference_deflections(tree_fn):
     rows = list(csv.DictReader((DATA / "reference_deflections.csv").open()))
 
     def col(*keys):
@@ -69,10 +73,11 @@ def test_reference_deflections(fanuc):
 
     q = np.radians(col(*(f"q{i}_deg" for i in range(1, 7))))
     f, m = col("fx_N", "fy_N", "fz_N"), col("mx_Nm", "my_Nm", "mz_Nm")
-    dp, ok = jax.vmap(lambda a, b, c: jaxcal.tree_deflection(fanuc[1], a, b, c, at="tool"))(
-        jnp.asarray(q), jnp.asarray(f), jnp.asarray(m)
+    dp, ok = zip(
+        *(tree_fn(*(jnp.asarray(x) for x in row))[::2] for row in zip(q, f, m, strict=True)),
+        strict=True,
     )
-    assert bool(jnp.all(ok))
+    assert all(bool(o) for o in ok)
     err_um = np.abs(np.asarray(dp) * 1e3 - col("dx_mm", "dy_mm", "dz_mm")) * 1e3
     assert err_um.max() <= 0.5, err_um.max()
 
@@ -129,10 +134,11 @@ def test_compensator_derivatives(fanuc):
     def spec_dp(kc, s0):
         return jaxcal.deflection(eqx.tree_at(lambda r: (r.Kc, r.s0), robot, (kc, s0)), q, f)
 
-    # Jitted once each: the finite differences below call them four more times.
-    tree_dp, spec_dp = jax.jit(tree_dp), jax.jit(spec_dp)
+    # One program gives the tree's deflection and its derivatives: the finite
+    # differences below call it four more times.
+    tree_both = jax.jit(jax.jacfwd(lambda *x: (tree_dp(*x),) * 2, argnums=(0, 1), has_aux=True))
     x = (tree.laws[0].Kc, tree.laws[0].s0)
-    jt = jax.jit(jax.jacfwd(tree_dp, argnums=(0, 1)))(*x)
+    jt = tree_both(*x)[0]
     js = jax.jit(jax.jacfwd(spec_dp, argnums=(0, 1)))(*x)
     for a, b, h in zip(jt, js, (1e2, 1e-5), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-18 / h)
@@ -140,7 +146,7 @@ def test_compensator_derivatives(fanuc):
     for i, h in ((0, 1e2), (1, 1e-5)):
         up, dn = list(x), list(x)
         up[i], dn[i] = x[i] + h, x[i] - h
-        fd = (tree_dp(*up) - tree_dp(*dn)) / (2 * h)
+        fd = (tree_both(*up)[1] - tree_both(*dn)[1]) / (2 * h)
         np.testing.assert_allclose(jt[i], fd, rtol=1e-5, atol=1e-6 * float(jnp.abs(jt[i]).max()))
 
 
@@ -151,9 +157,7 @@ def test_round_trip(fanuc, tree_fn):
     assert again.laws[0].law == "compensator"
     q, f = jnp.asarray([0.1, 0.3, -0.2, 0.4, 0.5, 0.6]), jnp.asarray([0.0, 0.0, -5000.0])
     np.testing.assert_allclose(
-        jaxcal.tree_deflection(again, q, f, at="tool")[0],
-        tree_fn(q, f, jnp.zeros(3))[0],
-        atol=1e-13,
+        _tree_fn(again)(q, f, jnp.zeros(3))[0], tree_fn(q, f, jnp.zeros(3))[0], atol=1e-13
     )
 
 
@@ -202,6 +206,10 @@ def test_absolute_measurements_determine_the_compensator(capsys):
     assert kc["std_deflection"] is None or kc["std_deflection"] > 10 * kc["std_absolute"], kc
 
 
+# One compiled program per placement of the lateral springs (the compliances are values).
+_predict_markers = eqx.filter_jit(jaxcal.predict_markers)
+
+
 def test_lateral_springs_before_or_after_the_joint():
     d = jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))
     q = jnp.asarray(np.linspace(-0.5, 0.5, 19))
@@ -217,7 +225,7 @@ def test_lateral_springs_before_or_after_the_joint():
             assert jaxcal.tree_from_dict(jaxcal.tree_to_dict(r)).lateral_before_joint == (
                 where == "before-joint"
             )
-            out[where, lateral] = np.asarray(jaxcal.predict_markers(r, q)[0])
+            out[where, lateral] = np.asarray(_predict_markers(r, q)[0])
     # Without lateral springs the placement cannot matter; with them it does.
     np.testing.assert_allclose(out["after-joint", 0.0], out["before-joint", 0.0], atol=1e-12)
     assert np.abs(out["after-joint", 20.0] - out["before-joint", 20.0]).max() > 1e-5

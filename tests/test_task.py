@@ -4,6 +4,7 @@ simulated calibrations of the linear-Gaussian problem it describes, and `evaluat
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +15,11 @@ from jaxcal.design import design_observation
 from jaxcal.internal.cli import main
 
 HEAD = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N,mx_Nm,my_Nm,mz_Nm\n"
+
+# The observation matrices compiled (settings static): one program serves the design and
+# the task, which have as many rows. Op by op, the full model's equilibrium and its
+# derivatives would be compiled operation by operation.
+_observe = eqx.filter_jit(design_observation)
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +50,10 @@ def test_gradient_matches_central_differences(robot, design):
     # The linear model (eq. 5): the criterion's own algebra is what is checked here; the
     # full model's observation gradients are checked with the design criteria.
     kw = dict(parameters="physical", include_k1=True, model="linear")
-    W = jaxcal.task_information(design_observation(robot, jnp.asarray(tq), tf, None, **kw)[0])
 
     def value(qd):
+        # The task's W (independent of qd) in the same program: one compile in all.
+        W = jaxcal.task_information(design_observation(robot, jnp.asarray(tq), tf, None, **kw)[0])
         obs, nominal = design_observation(robot, qd, force, None, **kw)
         return jaxcal.task_value(obs, nominal, sigma, W)
 
@@ -68,8 +75,8 @@ def test_prediction_equals_simulated_calibrations(robot, design):
     tq, tf, _ = _task(design)
     pred = jaxcal.task_prediction(robot, (q, force, None), (tq, tf, None), sigma=sigma)
     kw = dict(parameters="physical", include_k1=True, model="full")
-    A = np.asarray(design_observation(robot, q, force, None, **kw)[0])
-    J = np.asarray(design_observation(robot, jnp.asarray(tq), tf, None, **kw)[0])
+    A = np.asarray(_observe(robot, jnp.asarray(q), jnp.asarray(force), None, **kw)[0])
+    J = np.asarray(_observe(robot, jnp.asarray(tq), jnp.asarray(tf), None, **kw)[0])
     s = np.asarray(sigma)
     X = (A / s[:, None, None]).reshape(-1, A.shape[-1])
     scale = np.linalg.norm(X, axis=0)

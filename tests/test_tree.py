@@ -14,6 +14,8 @@ Justin (data: Tenhumberg & Bäuml, Humanoids 2021; see tests/data/convert_dlr_ag
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -109,9 +111,8 @@ def test_kinematics_against_independent_dh(justin):
 def test_equilibrium_is_stationary_and_differentiable(justin, data):
     robot = _soft(justin)
     q = jnp.asarray(data.q[3])
-    eq = jaxcal.tree_equilibrium(robot, q)
-    assert bool(eq.converged)
-    # Stationary total potential: the springs balance gravity.
+    # Each check is one jitted program: run op by op, every solve inside would be
+    # compiled on its own.
     from jaxcal.internal import gravity_potential  # noqa: PLC0415
 
     def total(phi):
@@ -119,7 +120,14 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
         spring = jnp.where(c > 0, 0.5 * phi**2 / jnp.where(c > 0, c, 1.0), 0.0)
         return gravity_potential(robot, q, phi) + jnp.sum(spring)
 
-    g = jax.grad(total)(eq.phi)
+    @jax.jit
+    def stationarity():
+        eq = jaxcal.tree_equilibrium(robot, q)
+        return eq.converged, jax.grad(total)(eq.phi)
+
+    converged, g = stationarity()
+    assert bool(converged)
+    # Stationary total potential: the springs balance gravity.
     assert float(jnp.max(jnp.abs(g))) < 1e-9  # N·m
 
     # d(marker)/d(compliance) by the implicit function theorem against central differences.
@@ -128,20 +136,26 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
         return jaxcal.predict_markers(r, q)[0][0]
 
     direction = jnp.zeros_like(robot.compliance).at[robot.revolute[5], 0].set(1.0)
-    _, tangent = jax.jvp(marker, (robot.compliance,), (direction,))
+
+    @jax.jit
+    def derivatives(c):
+        tangent = jax.jvp(marker, (c,), (direction,))[1]
+        # Reverse mode (what a calibration's Jacobian uses) transposes the same adjoint
+        # solve.
+        return tangent, jnp.einsum("ijk,jk->i", jax.jacrev(marker)(c), direction)
+
+    tangent, rev = derivatives(robot.compliance)
     h = 1e-7
-    fd = (marker(robot.compliance + h * direction) - marker(robot.compliance - h * direction)) / (
-        2 * h
-    )
+    at = jax.jit(marker)
+    fd = (at(robot.compliance + h * direction) - at(robot.compliance - h * direction)) / (2 * h)
     np.testing.assert_allclose(tangent, fd, rtol=1e-5, atol=1e-9)
-    # Reverse mode (what a calibration's Jacobian uses) transposes the same adjoint solve.
-    rev = jnp.einsum("ijk,jk->i", jax.jacrev(marker)(robot.compliance), direction)
     np.testing.assert_allclose(rev, tangent, rtol=1e-8, atol=1e-12)
 
 
 def test_jit_vmap_consistency(justin, data):
     robot = _soft(justin)
-    y, ok = jaxcal.predicted_markers(robot, data.subset(np.arange(4)))
+    # The 120 rows of `simulated`: one compiled batch program serves both.
+    y, ok = jaxcal.predicted_markers(robot, data.subset(np.arange(BLOCK)))
     for i in range(4):
         yi = jaxcal.marker_positions(
             robot,
@@ -218,7 +232,7 @@ def simulated(justin, data):
         truth,
         truth.world + jnp.array([0.01, -0.02, 0.005, 0.002, -0.001, 0.003]),
     )
-    sub = data.subset(np.arange(120))
+    sub = data.subset(np.arange(BLOCK))
     sim = _measure(truth, sub.q, sub.seen, seed=7)
     groups = ("frames", "joint-compliance")
     return truth, sim, groups, jaxcal.calibrate_tree(justin, sim, groups)
@@ -227,9 +241,28 @@ def simulated(justin, data):
 SIGMA = 2e-4  # m, the simulated noise
 
 
+BLOCK = 120  # poses per batch of simulated markers: the rows of `simulated`
+
+
 def _measure(truth, q, seen, seed):
-    plan = jaxcal.MarkerData(q=q, markers=None, seen=seen, sigma=np.full(len(q), SIGMA))
-    y, _ = jaxcal.predicted_markers(truth, plan)
+    # Predicted in blocks of BLOCK poses (the last padded with its first pose): one
+    # compiled batch program serves any number of rows.
+    n = len(q)
+    padded = np.concatenate([q, np.repeat(q[:1], -n % BLOCK, axis=0)])
+    y = np.concatenate(
+        [
+            jaxcal.predicted_markers(
+                truth,
+                jaxcal.MarkerData(
+                    q=block,
+                    markers=None,
+                    seen=np.ones((BLOCK, seen.shape[1]), bool),
+                    sigma=np.full(BLOCK, SIGMA),
+                ),
+            )[0]
+            for block in np.split(padded, len(padded) // BLOCK)
+        ]
+    )[:n]
     noisy = y + np.random.default_rng(seed).normal(size=y.shape) * SIGMA
     return jaxcal.MarkerData(q=q, markers=noisy, seen=seen, sigma=np.full(len(q), SIGMA))
 
@@ -318,15 +351,26 @@ def test_advised_rows_simulated_and_added_determine_the_springs(justin, simulate
         assert again.fitted[i] and again.std[i] <= 0.1 * abs(again.estimate[i]), n
 
 
-def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
-    # The 120 rows and groups of the test above (its compiled program is reused).
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """`identify --params frames,joint-compliance --json --no-advice --save-robot` on the
+    first 120 rows (the rows and groups of `simulated`: its compiled programs are
+    reused): (data file, saved robot file, JSON output). One run serves the tests of the
+    JSON output and of the saved robot."""
     rows = DATA.read_text().splitlines()[:121]
-    part = tmp_path / "justin120.csv"
+    folder = tmp_path_factory.mktemp("justin120")
+    part, cal = folder / "justin120.csv", folder / "cal.json"
     part.write_text("\n".join(rows) + "\n")
     args = ["identify", str(part), "--robot", "dlr_agile_justin"]
-    args += ["--params", "frames,joint-compliance"]
-    assert main([*args, "--json", "--no-advice"]) == 0
-    out = json.loads(capsys.readouterr().out)
+    args += ["--params", "frames,joint-compliance", "--save-robot", str(cal)]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main([*args, "--json", "--no-advice"]) == 0
+    return part, cal, json.loads(out.getvalue())
+
+
+def test_cli_identify_names_springs_the_data_do_not_determine(identified, capsys):
+    part, _, out = identified
     assert "advice" not in out
     flagged = out["not_determined"]
     assert flagged and out["threshold"] == 0.1
@@ -336,6 +380,8 @@ def test_cli_identify_names_springs_the_data_do_not_determine(tmp_path, capsys):
         assert (p["ci95"] is None) == loose
         if loose:
             assert flagged[p["name"]]["held"] is False
+    args = ["identify", str(part), "--robot", "dlr_agile_justin"]
+    args += ["--params", "frames,joint-compliance"]
     assert main(args) == 0
     text = capsys.readouterr().out
     first = next(iter(flagged))
@@ -360,34 +406,15 @@ def test_nominal_model_reproduces_published_error(justin, data):
     assert 0.9 * 21.33 <= e.mean() <= 1.1 * 21.33, e.mean()
 
 
-def test_cli_identify_simulate_round_trip(tmp_path, capsys):
+def test_cli_identify_simulate_round_trip(identified, tmp_path):
     """`identify --save-robot` then `simulate --robot CAL.json` predicts the data at the
     fit's RMS."""
-    rows = DATA.read_text().splitlines()[:81]
-    small = tmp_path / "justin80.csv"
-    small.write_text("\n".join(rows) + "\n")
-    cal = tmp_path / "cal.json"
-    assert (
-        main(
-            [
-                "identify",
-                str(small),
-                "--robot",
-                "dlr_agile_justin",
-                "--params",
-                "frames",
-                "--save-robot",
-                str(cal),
-                "--json",
-            ]
-        )
-        == 0
-    )
-    out = json.loads(capsys.readouterr().out)
-    assert out["converged"] and {p["name"] for p in out["parameters"]} >= {"world.x", "right.x"}
+    data, cal, out = identified
+    assert out["converged"] and out["saved_robot"] == str(cal)
+    assert {p["name"] for p in out["parameters"]} >= {"world.x", "right.x"}
     pred = tmp_path / "pred.csv"
-    assert main(["simulate", str(small), "--robot", str(cal), "-o", str(pred)]) == 0
+    assert main(["simulate", str(data), "--robot", str(cal), "-o", str(pred)]) == 0
     robot = jaxcal.load_tree(cal)
-    a, b = jaxcal.read_markers(small, robot), jaxcal.read_markers(pred, robot)
+    a, b = jaxcal.read_markers(data, robot), jaxcal.read_markers(pred, robot)
     err = np.linalg.norm(np.asarray(a.markers) - np.asarray(b.markers), axis=-1)
     assert abs(np.sqrt(np.mean(err**2)) * 1e3 - out["rms_mm"]) < 1e-3

@@ -31,6 +31,12 @@ def one_level(robot, data_dir):
     return jaxcal.Dataset(jnp.asarray(q), d.force, d.moment, None, d.sigma, d.ids)
 
 
+@pytest.fixture(scope="module")
+def measured(truth, one_level):
+    """The one-level design measured on the robot as built (σ = 20 µm, fixed key)."""
+    return jaxcal.simulate(truth, one_level, noise_std=2e-5, key=3)
+
+
 def _rows(advice: dict, sigma_mm: float) -> jaxcal.Dataset:
     q, f = [], []
     for p in advice["poses"]:
@@ -51,9 +57,8 @@ def _concatenate(a, b):
 
 
 def test_one_q2_level_names_kc_and_its_advice_determines_it(
-    robot, truth, one_level, tmp_path, capsys
+    robot, truth, measured, tmp_path, capsys
 ):
-    measured = jaxcal.simulate(truth, one_level, noise_std=2e-5, key=3)
     first = tmp_path / "one_level.csv"
     jaxcal.write_dataset(first, measured)
     assert main(["identify", str(first), "--json"]) == 0
@@ -98,8 +103,7 @@ def test_one_q2_level_names_kc_and_its_advice_determines_it(
     assert d2["not_determined"] == {}
 
 
-def test_api_flags_hold_and_free(robot, truth, one_level):
-    measured = jaxcal.simulate(truth, one_level, noise_std=2e-5, key=3)
+def test_api_flags_hold_and_free(robot, measured):
     with pytest.raises(ValueError, match=r"Kc.*1 distinct q2"):
         jaxcal.identify(robot, measured, "nonlinear")  # free: cannot be estimated at all
     res = jaxcal.identify(robot, measured, "nonlinear", undetermined="hold")

@@ -128,6 +128,10 @@ def dof_scale(robot: Robot, q) -> Float[Array, " ndof"]:
     return jnp.concatenate([robot.compliance, fx.scale]).astype(q.dtype)
 
 
+# Jitted so that its trace is cached: a deflection solves two equilibria of the same
+# shapes (loaded and unloaded), and observation matrices, fits and designs trace it
+# again under their derivatives; one trace serves them all.
+@eqx.filter_jit
 def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> Equilibrium:
     q = jnp.asarray(q)
     dtype = jnp.result_type(q, robot.compliance)

@@ -253,6 +253,7 @@ def _check_load(robot, q, force, moment, at) -> int:
     return marker_index(robot, at)
 
 
+@eqx.filter_jit
 def tree_equilibrium(
     robot: TreeRobot,
     q: Float[Array, " n"],
@@ -320,6 +321,7 @@ def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int):
     return phi, t_phi
 
 
+@eqx.filter_jit
 def tree_deflection(
     robot: TreeRobot,
     q: Float[Array, " n"],
@@ -339,6 +341,7 @@ def tree_deflection(
     return p1 - p0, loaded.converged & free.converged
 
 
+@eqx.filter_jit
 def predict_markers(
     robot: TreeRobot, q: Float[Array, " n"]
 ) -> tuple[Float[Array, "k 3"], Bool[Array, ""]]:

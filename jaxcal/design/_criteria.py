@@ -62,6 +62,7 @@ __all__ = [
     "design_observation",
     "design_criteria",
     "criteria_from_observation",
+    "host_criteria",
     "k1_identifiable",
     "select_parameters",
     "resolve_parameters",
@@ -295,7 +296,7 @@ def design_criteria(
         obs, nominal = observe_jit(
             robot, q, force, moment, "physical", None, None, include_k1, model
         )
-    return criteria_from_observation(
+    return host_criteria(
         obs,
         nominal,
         sig,
@@ -304,6 +305,36 @@ def design_criteria(
         weights=weights,
         select=select_parameters(names, focus),
     )
+
+
+# One compiled program for the criteria of a design (run op by op, each of their
+# operations would be compiled on its own).
+_criteria_compiled = eqx.filter_jit(criteria_from_observation)
+
+
+def host_criteria(
+    obs: Float[Array, "m 3 p"],
+    nominal: Float[Array, " p"],
+    sigma: Float[Array, " m"],
+    *,
+    names: tuple[str, ...] = (),
+    relative: bool = True,
+    weights: tuple[float, float] = (0.5, 0.5),
+    select: tuple[int, ...] | None = None,
+) -> DesignCriteria:
+    """Host-side `criteria_from_observation` (same arguments): one compiled program; a
+    design that does not determine every parameter is evaluated again outside jit,
+    where its null space can be named."""
+    settings = dict(
+        names=names,
+        relative=relative,
+        weights=(float(weights[0]), float(weights[1])),
+        select=select,
+    )
+    c = _criteria_compiled(obs, nominal, sigma, **settings)
+    if not bool(c.full_rank):
+        c = criteria_from_observation(obs, nominal, sigma, **settings)
+    return c
 
 
 def resolve_parameters(

@@ -31,6 +31,7 @@ from .._robot import Robot
 from ._criteria import (
     criteria_from_observation,
     design_parameter_names,
+    host_criteria,
     k1_identifiable,
     observe_jit,
 )
@@ -130,9 +131,7 @@ def task_prediction(
     cols = np.asarray(kept)
     names = tuple(all_names[i] for i in kept)
     obs, nominal = observe_physical(robot, *design, True, model)
-    crit = criteria_from_observation(
-        obs[:, :, cols], nominal[cols], sig, names=names, relative=False
-    )
+    crit = host_criteria(obs[:, :, cols], nominal[cols], sig, names=names, relative=False)
     # The task's sensitivity to every physical parameter: one the design leaves out (k1)
     # or cannot determine, and the task needs, makes the prediction unbounded.
     t_obs, _ = observe_physical(robot, *task, True, model)
