@@ -109,6 +109,13 @@ def optimised_programs():
         yield
 
 
+@pytest.fixture(scope="session")
+def optimisations():
+    """`with optimisations():` LLVM's optimisations on for the compiles inside (a module
+    fixture's long-running programs, where the function-scoped fixture cannot be used)."""
+    return _optimisations_on
+
+
 @pytest.fixture
 def optimised_test():
     """LLVM's optimisations on for one test's compiles: one whose programs run long."""

@@ -4,7 +4,6 @@ and the `design`/`evaluate` commands."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 
 import jax
@@ -134,7 +133,6 @@ def test_gradient_matches_central_differences(robot, designs, kw):
     np.testing.assert_allclose(fd, exact, atol=1e-6 * np.linalg.norm(g))
 
 
-@pytest.mark.usefixtures("optimised_test")  # its second-order program runs long
 def test_full_model_criterion_value_and_gradient(robot, designs):
     # model="full": the observation equals jaxcal.observation_physical (same full
     # equilibrium model), and the criterion's gradient in q (second-order autodiff
@@ -242,25 +240,13 @@ def test_structured_and_paper_plans(robot):
     # The paper's plan in our convention: tests/test_paper_convention.py.
 
 
-@contextlib.contextmanager
-def _optimisations_on():
-    # XLA's optimisations on for a module fixture's compiles, as the `optimised_test`
-    # fixture does for a test's: for programs whose run takes longer than their compile.
-    before = jax.config.values["jax_disable_most_optimizations"]
-    jax.config.update("jax_disable_most_optimizations", False)
-    try:
-        yield
-    finally:
-        jax.config.update("jax_disable_most_optimizations", before)
-
-
 @pytest.fixture(scope="module")
 def optimised(robot):
     # The default problem (physical set linearised from the full model, relative trace,
     # vertical loads, k1 excluded), started from the best 4 of the 200 random feasible
     # designs it is compared with (seed 0: the `designs` fixture).
     # The physical set spends its trace on Kc, which it cannot determine: a warning says so.
-    with _optimisations_on(), pytest.warns(UserWarning, match=r"Kc: 9\d % of the trace"):
+    with pytest.warns(UserWarning, match=r"Kc: 9\d % of the trace"):
         return optimise_design(
             robot,
             12,
@@ -283,8 +269,7 @@ def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised
     # The reference: the best of the 200 random designs under the same (full-model)
     # criterion, the best one re-evaluated through `design_criteria`'s own path.
     P = DesignProblem(robot, 12, parameters="physical")
-    with _optimisations_on():  # the program the fixture compiled for its pool, reused
-        rand = np.asarray(pool_values(P, jnp.asarray(designs)))
+    rand = np.asarray(pool_values(P, jnp.asarray(designs)))
     assert d.random_best == pytest.approx(rand.min(), rel=1e-12)
     F = _vertical(robot, 12)
     best_random = design_criteria(robot, designs[int(np.argmin(rand))], F, parameters="physical")

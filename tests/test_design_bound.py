@@ -71,28 +71,16 @@ def test_bound_is_certified_and_below_every_design_on_its_pool(robot, criterion)
     assert b.value < 0.8 * values.min()
 
 
-@contextlib.contextmanager
-def _optimisations_on():
-    # XLA's optimisations on for a module fixture's compiles, as the `optimised_test`
-    # fixture does for a test's: the command's BFGS rounds on the full model run longer
-    # than they compile. Users run the command with XLA's defaults (optimisations on).
-    before = jax.config.values["jax_disable_most_optimizations"]
-    jax.config.update("jax_disable_most_optimizations", False)
-    try:
-        yield
-    finally:
-        jax.config.update("jax_disable_most_optimizations", before)
-
-
 @pytest.fixture(scope="module")
-def default_design():
+def default_design(optimisations):
     # `jaxcal design --configs 12 --json`: aggregated set, trace, full model, 3 q2 levels
     # at least 20° apart, the lowest and highest at the ends of the q2 range, vertical
-    # loads. Run once for the tests below.
+    # loads. Run once for the tests below, compiled with LLVM's optimisations (the
+    # command's BFGS rounds on the full model run longer than they compile).
     from jaxcal.internal.cli import main
 
     out = io.StringIO()
-    with _optimisations_on(), contextlib.redirect_stdout(out):
+    with optimisations(), contextlib.redirect_stdout(out):
         assert main(["design", "--configs", "12", "--json"]) == 0
     return json.loads(out.getvalue())
 
