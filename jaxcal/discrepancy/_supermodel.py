@@ -30,7 +30,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._batching import chunk_width, map_in_chunks
+from .._batching import batch_map, chunk_width, map_in_chunks
 from .._exported import exported
 from .._identification.lsq import levenberg_marquardt
 from .._io import Dataset, configurations
@@ -292,7 +292,10 @@ class SuperModel:
         return embed(u, mask), res, jnp.sum(r**2), Jw, solved, valid, steps
 
     def _batched(self, model: _Model, trials: _Trial, fit, max_steps):
-        return jax.vmap(lambda t: self._one(model, t, fit, max_steps))(trials)
+        # On a CPU a call holds one member and `batch_map` runs it untransformed (one
+        # member of a `lax.map`): batching the LM loop around the equilibrium's Newton
+        # loops took most of the tracing, for nothing.
+        return batch_map(lambda *t: self._one(model, _Trial(*t), fit, max_steps), *trials)
 
     def _call(self, start, sel, mask, target, sigma, fit: bool):
         fn = self._compiled()
