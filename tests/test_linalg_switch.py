@@ -16,7 +16,7 @@ import pytest
 DATA = Path(__file__).parent / "data" / "example_calibration.csv"
 
 SCRIPT = f"""
-import json, jax
+import json, jax, equinox as eqx
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp, numpy as np, jaxcal
 from jaxcal.internal import linalg_backend
@@ -25,12 +25,14 @@ robot = jaxcal.load_robot()
 q = jnp.deg2rad(jnp.array([10.0, 20.0, -5.0, 30.0, -40.0, 15.0]))
 f = jnp.array([300.0, -200.0, -5000.0])
 theta = jaxcal.equilibrium(robot, q, f)
-grad = jax.grad(lambda r: jaxcal.equilibrium(r, q, f)[1])(robot).compliance
+# Each computation one compiled program (op by op, every operation is compiled alone).
+with_c = lambda c: eqx.tree_at(lambda r: r.compliance, robot, c)
+grad = jax.jit(jax.grad(lambda c: jaxcal.equilibrium(with_c(c), q, f)[1]))(robot.compliance)
 K = jaxcal.cartesian_stiffness(robot, q)
 res = jaxcal.fit_linear(robot, jaxcal.read_dataset({str(DATA)!r}, robot))
 t = jnp.linspace(0.0, 2.0, 20)
 target = jnp.stack([3.0 * jnp.exp(-1.3 * t), jnp.sin(t), t], 1)
-lm = jaxcal.nonlinear_fit(
+lm = eqx.filter_jit(jaxcal.nonlinear_fit)(
     lambda p: jnp.stack([p[0] * jnp.exp(-p[1] * t), jnp.sin(t), t], 1),
     jnp.array([1.0, 1.0]), target, jnp.full(20, 0.01),
 )
