@@ -350,7 +350,8 @@ def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
 class Stage(NamedTuple):
     """One row of a validation table: the groups fitted so far, and the held-out 3-D
     marker errors (mm) after fitting them; `not_determined`: the fitted springs, masses
-    and spring-law constants the training rows do not determine one by one."""
+    and spring-law constants the training rows do not determine one by one;
+    `calibration`: the stage's calibration itself (its robot, estimates and stds)."""
 
     groups: tuple[str, ...]
     mean_mm: float
@@ -361,6 +362,7 @@ class Stage(NamedTuple):
     converged: bool
     seconds: float
     not_determined: tuple[str, ...] = ()
+    calibration: TreeCalibration | None = None
 
 
 def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -400,6 +402,7 @@ def validate_tree(
                 converged=cal.converged,
                 seconds=cal.seconds,
                 not_determined=cal.not_determined,
+                calibration=cal,
             )
         )
         if progress is not None:
