@@ -206,10 +206,6 @@ def test_absolute_measurements_determine_the_compensator(capsys):
     assert kc["std_deflection"] is None or kc["std_deflection"] > 10 * kc["std_absolute"], kc
 
 
-# One compiled program per placement of the lateral springs (the compliances are values).
-_predict_markers = eqx.filter_jit(jaxcal.predict_markers)
-
-
 def test_lateral_springs_before_or_after_the_joint():
     d = jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))
     q = jnp.asarray(np.linspace(-0.5, 0.5, 19))
@@ -225,7 +221,7 @@ def test_lateral_springs_before_or_after_the_joint():
             assert jaxcal.tree_from_dict(jaxcal.tree_to_dict(r)).lateral_before_joint == (
                 where == "before-joint"
             )
-            out[where, lateral] = np.asarray(_predict_markers(r, q)[0])
+            out[where, lateral] = np.asarray(jaxcal.predict_markers(r, q)[0])
     # Without lateral springs the placement cannot matter; with them it does.
     np.testing.assert_allclose(out["after-joint", 0.0], out["before-joint", 0.0], atol=1e-12)
     assert np.abs(out["after-joint", 20.0] - out["before-joint", 20.0]).max() > 1e-5
