@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal.internal import pivoted_subset, split_rows
+from jaxcal.internal import map_in_chunks, pivoted_subset, split_rows
 from jaxcal.internal.cli import main
 
 DATA = Path(__file__).parent / "data" / "dlr_agile_justin.csv"
@@ -245,24 +245,18 @@ BLOCK = 120  # poses per batch of simulated markers: the rows of `simulated`
 
 
 def _measure(truth, q, seen, seed):
-    # Predicted in blocks of BLOCK poses (the last padded with its first pose): one
-    # compiled batch program serves any number of rows.
-    n = len(q)
-    padded = np.concatenate([q, np.repeat(q[:1], -n % BLOCK, axis=0)])
-    y = np.concatenate(
-        [
-            jaxcal.predicted_markers(
-                truth,
-                jaxcal.MarkerData(
-                    q=block,
-                    markers=None,
-                    seen=np.ones((BLOCK, seen.shape[1]), bool),
-                    sigma=np.full(BLOCK, SIGMA),
-                ),
-            )[0]
-            for block in np.split(padded, len(padded) // BLOCK)
-        ]
-    )[:n]
+    # Predicted in blocks of BLOCK poses (the last padded): one compiled batch program
+    # serves any number of rows.
+    def block(qb):
+        plan = jaxcal.MarkerData(
+            q=qb,
+            markers=None,
+            seen=np.ones((BLOCK, seen.shape[1]), bool),
+            sigma=np.full(BLOCK, SIGMA),
+        )
+        return jaxcal.predicted_markers(truth, plan)
+
+    y, _ = map_in_chunks(block, len(q), BLOCK, q)
     noisy = y + np.random.default_rng(seed).normal(size=y.shape) * SIGMA
     return jaxcal.MarkerData(q=q, markers=noisy, seen=seen, sigma=np.full(len(q), SIGMA))
 
