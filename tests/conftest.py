@@ -34,7 +34,7 @@ jax.config.update("jax_enable_x64", True)
 
 # Tracing allocates millions of short-lived Python objects, and with the default
 # thresholds the cyclic collector's full passes over JAX's caches took 5 % of a test
-# process (3.0 s of a 65 s file, 0.3 s with these). A worker's memory stays bounded by
+# process (3.0 s of a 60 s file, 0.3 s with these). A worker's memory stays bounded by
 # `_release_compiled_programs` below, which collects after clearing the caches.
 gc.set_threshold(100_000, 50, 1000)
 
