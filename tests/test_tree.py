@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import re
 from pathlib import Path
 
 import equinox as eqx
@@ -26,7 +27,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal.internal import map_in_chunks, pivoted_subset, split_rows
+from jaxcal.internal import map_in_chunks, pivoted_subset, scaled_jacobian, split_rows
 from jaxcal.internal.cli import main
 
 DATA = Path(__file__).parent / "data" / "dlr_agile_justin.csv"
@@ -306,6 +307,71 @@ def test_identification_recovers_simulated_truth(justin, simulated):
         assert held.estimate[i] == nominal[i]
 
 
+PRIOR = 5.0  # µrad/(N·m): the joint springs' prior std in the prior tests
+
+
+def test_priors_give_the_posterior(justin, simulated):
+    """With a Gaussian prior on every joint spring (centred on the robot file's 0) the
+    fit is the maximum a posteriori estimate: every spring is fitted, one that no row
+    loads keeps its prior exactly, and the estimate and covariance are the posterior's,
+    checked against the Jacobian at the estimate (an independent program)."""
+    from jaxcal.internal import get_vector  # noqa: PLC0415
+
+    truth, sim, groups, plain = simulated
+    cal = jaxcal.calibrate_tree(justin, sim, groups, priors={"joint-compliance": PRIOR})
+    assert cal.converged, cal.message
+    prior = cal.prior_std
+    springs = np.array([p.group == "joint-compliance" for p in cal.table])
+    np.testing.assert_allclose(prior[springs], PRIOR * 1e-6, rtol=1e-12)  # SI
+    assert np.all(np.isinf(prior[~springs]))
+    assert np.all(cal.fitted[springs]) and np.array_equal(
+        cal.fitted[~springs], plain.fitted[~springs]
+    )
+    # dof: the data's rows plus one per prior, less the fitted parameters.
+    assert cal.dof == plain.dof + int(plain.fitted[springs].sum())
+    # A spring with no gravity torque (the vertical pan axis) keeps its prior.
+    i = names_all(cal).index("torso_1.k_theta")
+    assert "torso_1.k_theta" in plain.held
+    assert abs(cal.estimate[i]) < 1e-9 * PRIOR * 1e-6
+    assert cal.std[i] == pytest.approx(PRIOR * 1e-6, rel=1e-9)
+    # Posterior information = the data's (the σ-weighted Jacobian at the estimate) plus
+    # the prior's; the estimate is where the posterior's gradient vanishes.
+    F = np.flatnonzero(cal.fitted)
+    scale = np.array([p.scale for p in cal.table])
+    Js = scaled_jacobian(cal.robot, cal.table, sim).reshape(-1, len(cal.table))
+    J = (Js / scale)[:, F]  # ∂(prediction/σ)/∂p, SI
+    w2 = np.where(np.isfinite(prior), 1.0 / prior**2, 0.0)[F]
+    info = J.T @ J + np.diag(w2)
+    cov = cal.fit.covariance[np.ix_(F, F)]
+    np.testing.assert_allclose(np.asarray(cov) @ info, np.eye(len(F)), atol=1e-6)
+    r = (np.asarray(cal.fit.residuals) / SIGMA).reshape(-1)  # (measured − model)/σ
+    p0 = np.asarray(get_vector(justin, cal.table))[F]
+    grad = -J.T @ r + w2 * (cal.estimate[F] - p0)
+    # Within 1e-3 posterior std of the optimum, coordinate by coordinate.
+    assert np.all(np.abs(grad) / np.sqrt(np.diag(info)) < 1e-3)
+    # Springs the data determine move little: the prior is weak against them.
+    determined = [n not in plain.not_determined for n in names_all(plain)]
+    loaded = np.flatnonzero(springs & plain.fitted & np.array(determined))
+    assert len(loaded)
+    for k in loaded:
+        assert abs(cal.estimate[k] - plain.estimate[k]) < 2 * plain.std[k]
+        assert cal.std[k] <= plain.std[k] * (1 + 1e-9)
+
+
+@pytest.mark.parametrize(
+    "priors, needle",
+    [
+        ({"joint-stiffness": 1.0}, "unknown group or parameter(s) ['joint-stiffness']"),
+        ({"joint-compliance": "50%"}, "torso_1.k_theta is 0 in the robot file"),
+        ({"world.x": -1.0}, "world.x: the std must be positive and finite"),
+        ({"world.x": "wide"}, "world.x: 'wide' is not a number"),
+    ],
+)
+def test_bad_priors_are_named(justin, data, priors, needle):
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        jaxcal.calibrate_tree(justin, data, ("frames", "joint-compliance"), priors=priors)
+
+
 def test_advised_rows_simulated_and_added_determine_the_springs(justin, simulated):
     # The advice for the springs the 120 rows leave undetermined: poses within the joint
     # limits, all markers seen. Measured (simulated by the true robot, fresh noise) and
@@ -383,6 +449,28 @@ def test_cli_identify_names_springs_the_data_do_not_determine(identified, capsys
     assert f"{len(flagged)} springs, masses or spring-law constants are not determined" in text
     assert "--hold-undetermined" in text
     assert "more absolute measurement rows at these" in text  # the advice, computed
+
+
+def test_cli_identify_states_its_priors(identified, capsys):
+    part, _, plain = identified
+    args = ["identify", str(part), "--robot", "dlr_agile_justin", "--no-advice"]
+    args += ["--params", "frames,joint-compliance", "--prior", f"joint-compliance={PRIOR}"]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["converged"] and out["priors"] == {"joint-compliance": PRIOR}
+    by_name = {p["name"]: p for p in out["parameters"]}
+    # Every spring fitted under its prior (µrad/(N·m), as printed); the others have none.
+    for name, p in by_name.items():
+        assert p["prior_std"] == (PRIOR if name.endswith(".k_theta") else None), p
+    assert by_name["torso_1.k_theta"]["std"] == pytest.approx(PRIOR, rel=1e-9)
+    assert "torso_1.k_theta" not in out["held"]
+    assert main([*args, "--prior", "world.x=2"]) == 0
+    text = capsys.readouterr().out
+    assert "Gaussian priors, centred on the robot file's values: joint-compliance ± 5" in text
+    assert "world.x ± 2 mm" in text
+    # The FANUC (deflection data) has no priors: said, exit 2.
+    assert main(["identify", str(DATA.parent / "example_calibration.csv"), "--prior", "k2=1"]) == 2
+    assert "--prior: priors are for robots given as a kinematic tree" in capsys.readouterr().err
 
 
 def names_all(cal):

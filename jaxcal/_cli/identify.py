@@ -10,6 +10,7 @@ from .._identification.identify import METHODS
 from .main import (
     add_fix_argument,
     add_overwrite_argument,
+    add_prior_argument,
     add_robot_argument,
     check_output_path,
     fix_names,
@@ -108,6 +109,7 @@ def register(sub) -> None:
         "parameter groups to fit, of frames,joint-offsets,dh,joint-compliance,"
         "lateral-compliance (default: every group the data determine)",
     )
+    add_prior_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -130,6 +132,11 @@ def run(args: argparse.Namespace) -> int:
         from .validate import identify_tree
 
         return identify_tree(args)
+    if args.prior:
+        raise ValueError(
+            "--prior: priors are for robots given as a kinematic tree (absolute marker data); "
+            "for this robot hold a parameter at its value with --fix"
+        )
     if args.save_robot and args.save_robot.lower().endswith(".urdf"):
         raise ValueError(
             f"--save-robot {args.save_robot}: a deflection calibration is saved as a robot "

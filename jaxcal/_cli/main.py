@@ -76,6 +76,29 @@ def add_fix_argument(p: argparse.ArgumentParser, why: str) -> None:
     )
 
 
+def add_prior_argument(p: argparse.ArgumentParser) -> None:
+    """`--prior NAME=STD`, repeatable and comma-separated alike: Gaussian priors of a
+    tree robot's calibration."""
+    p.add_argument(
+        "--prior",
+        action="append",
+        default=[],
+        metavar="NAME=STD",
+        help="robots given as a kinematic tree: a Gaussian prior centred on the robot file's "
+        "value, for a parameter group (e.g. lateral-compliance=2) or one parameter "
+        "(right_3.k_theta=5), STD in the parameter's printed unit (mm, mrad, µrad/(N·m), kg) "
+        "or X%% of the file's value; a parameter with a prior is fitted whether or not the "
+        "data determine it (its std is then the posterior one); repeatable or comma-separated",
+    )
+
+
+def priors_of(args: argparse.Namespace) -> dict:
+    """The `--prior` options as one `priors` mapping (a later entry wins)."""
+    from .._identification.parameter_groups import parse_priors
+
+    return parse_priors(",".join(getattr(args, "prior", None) or []))
+
+
 def seed(text: str) -> int:
     """argparse type of `--seed`: a non-negative integer that fits a 64-bit key."""
     try:

@@ -14,11 +14,13 @@ import equinox as eqx
 import numpy as np
 
 from .main import (
+    add_prior_argument,
     add_robot_argument,
     check_output_path,
     fix_names,
     output_failed,
     print_json,
+    priors_of,
     seed,
 )
 
@@ -69,6 +71,7 @@ def register(sub) -> None:
         + ",".join(DEFAULT_GROUPS)
         + "; origins in place of dh for a URDF robot)",
     )
+    add_prior_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -95,11 +98,12 @@ def _load(args):
 def run(args: argparse.Namespace) -> int:
     from .._format import format_table
     from .._identification.elastogeometric import split_rows, validate_tree
-    from .._identification.parameter_groups import parse_groups
+    from .._identification.parameter_groups import parameter_table, parse_groups
     from .._identification.result import THRESHOLD
 
     robot, data = _load(args)
     groups = parse_groups(args.params, robot)
+    priors = priors_of(args)
     n = len(data)
     if args.folds is not None:
         if not 2 <= args.folds <= n:
@@ -125,7 +129,14 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         folds.append(
-            validate_tree(robot, data.subset(train), data.subset(test), groups, progress=progress)
+            validate_tree(
+                robot,
+                data.subset(train),
+                data.subset(test),
+                groups,
+                progress=progress,
+                priors=priors,
+            )
         )
     published = PUBLISHED.get(robot.name, {})
     stages = []
@@ -154,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
                 "folds": len(splits),
                 "test_rows": [int(len(t)) for _, t in splits],
                 "seed": args.seed,
+                "priors": priors,
                 "stages": stages,
             }
         )
@@ -191,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         format_table(head, [[round(v, 2) if isinstance(v, float) else v for v in r] for r in table])
     )
+    if priors:
+        print(_priors_line(priors, parameter_table(robot, groups)))
     if any(any(f) for s in stages for f in s["not_determined"]):
         print(
             "not det.: fitted springs, masses or spring-law constants whose relative std "
@@ -218,6 +232,7 @@ def identify_tree(args: argparse.Namespace) -> int:
         check_output_path(str(sidecar_path(save)), "--save-robot (its sidecar)")
     robot, data = _load(args)
     groups = parse_groups(getattr(args, "params", None), robot)
+    priors = priors_of(args)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
     cal = calibrate_tree(
         robot,
@@ -226,9 +241,11 @@ def identify_tree(args: argparse.Namespace) -> int:
         hold=tuple(fix_names(args.fix)),
         threshold=args.max_relative_std,
         hold_undetermined=args.hold_undetermined,
+        priors=priors,
     )
+    prior_std = cal.prior_std if cal.prior_std is not None else np.full(len(cal.table), np.inf)
     params = []
-    for p, f, v, s in zip(cal.table, cal.fitted, cal.estimate, cal.std, strict=True):
+    for p, f, v, s, ps in zip(cal.table, cal.fitted, cal.estimate, cal.std, prior_std, strict=True):
         if f:
             ci = cal.interval95(p.name)
             params.append(
@@ -240,6 +257,7 @@ def identify_tree(args: argparse.Namespace) -> int:
                     "unit": p.unit,
                     "ci95": list(ci) if ci is not None else None,
                     "not_determined": p.name in cal.not_determined,
+                    "prior_std": float(ps * p.factor) if np.isfinite(ps) else None,
                 }
             )
     not_determined = {}
@@ -269,6 +287,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             "parameters": params,
             "held": list(cal.held),
             "not_determined": list(cal.not_determined),
+            "priors": priors,
         }
         try:
             if urdf_out:
@@ -293,6 +312,7 @@ def identify_tree(args: argparse.Namespace) -> int:
         "parameters": params,
         "held": list(cal.held),
         "threshold": cal.threshold,
+        "priors": priors,
         "not_determined": not_determined,
         "saved_robot": saved,
     }
@@ -306,6 +326,8 @@ def identify_tree(args: argparse.Namespace) -> int:
             f"\n{len(params)} parameters fitted; held at the robot file's values (not "
             f"determined by these data, or redundant): {', '.join(cal.held) or 'none'}"
         )
+        if priors:
+            print(_priors_line(priors, cal.table))
         if not_determined:
             print(_not_determined_line(not_determined, cal.threshold, args.hold_undetermined))
         if advice is not None:
@@ -335,6 +357,21 @@ def identify_tree(args: argparse.Namespace) -> int:
 
 
 _HEAD = ["parameter", "group", "estimate", "std", "95% low", "95% high", "unit"]
+
+
+def _priors_line(priors: dict, table) -> str:
+    def units(key):
+        found = dict.fromkeys(p.unit for p in table if key in (p.name, p.group))
+        return "/".join(found) or "its unit"
+
+    said = "; ".join(
+        f"{k} ± {v}" if isinstance(v, str) else f"{k} ± {v:g} {units(k)}" for k, v in priors.items()
+    )
+    return (
+        f"Gaussian priors, centred on the robot file's values: {said}. Estimates and std of "
+        "the parameters with a prior are posterior ones (a parameter the data do not see "
+        "keeps its prior std); chi2 and its degrees of freedom count the priors' terms."
+    )
 
 
 def _row(p: dict, not_determined: dict) -> list:

@@ -12,8 +12,16 @@ stay fitted unless `hold_undetermined`: on Agile Justin 40 of the 46 fitted spri
 flagged individually, yet together they take the held-out error from 6.5 mm (held at the
 file's values) to 2.9 mm (`benchmarks/README.md`).
 
+Optional Gaussian priors (`priors`: a std per group or parameter, centred on the robot
+file's values) make the fit a maximum a posteriori estimate: a parameter with a prior
+is fitted whatever the data say (the prior determines what they do not; its std is the
+posterior one), the pivoting chooses among the others. They let a few rows calibrate a
+model with more parameters than the rows determine, and keep near-redundant springs
+near their catalogue values.
+
 Every fit of one robot and one data shape shares one compiled program: the fitted
-subset is a traced mask over the full parameter table, not a static choice.
+subset and the priors are traced arrays over the full parameter table, not static
+choices.
 """
 
 from __future__ import annotations
@@ -34,9 +42,11 @@ from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
 from .parameter_groups import (
     Parameter,
+    PriorSpec,
     default_groups,
     get_vector,
     parameter_table,
+    prior_stds,
     set_vector,
 )
 from .result import THRESHOLD, Z95, relative_std, upper_bound95
@@ -152,6 +162,10 @@ class TreeCalibration(NamedTuple):
     - `not_determined`: fitted magnitudes (`MAGNITUDE_GROUPS`) whose relative std
       exceeds `threshold`, or that were held for it (`hold_undetermined`);
       `free_values`: their estimate and std in the fit that had them free (SI).
+    - `prior_std`: `(P,)` the Gaussian priors' std (SI, centred on the robot file's
+      values), `inf` where a parameter has none; `None`: no priors. With priors,
+      `estimate` and `std` are the posterior ones and `chi2`, `dof` count the priors'
+      terms.
     """
 
     robot: TreeRobot
@@ -169,6 +183,7 @@ class TreeCalibration(NamedTuple):
     not_determined: tuple[str, ...] = ()
     free_values: tuple[tuple[float, float], ...] = ()
     threshold: float = THRESHOLD
+    prior_std: np.ndarray | None = None
 
     @property
     def held(self) -> tuple[str, ...]:
@@ -215,7 +230,7 @@ def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
 
 
 @eqx.filter_jit
-def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
+def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, prior_weight, max_steps):
     p0 = get_vector(robot, table)
     return nonlinear_fit(
         lambda p: _predict(robot, table, p, q, rows, markers),
@@ -225,6 +240,7 @@ def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, max_steps):
         scale=scale,
         mask=mask,
         jacobian=lambda p: _jacobian(robot, table, p, q, rows, markers),
+        prior_weight=prior_weight,
         max_steps=max_steps,
         rtol=LM_TOL,
         atol=LM_TOL,
@@ -242,6 +258,7 @@ def calibrate_tree(
     rcond: float = PIVOT_RCOND,
     threshold: float = THRESHOLD,
     hold_undetermined: bool = False,
+    priors: dict[str, PriorSpec] | None = None,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
@@ -250,12 +267,15 @@ def calibrate_tree(
     built for (keep it the same across fits to share one compilation); `hold` names
     parameters to hold in any case. Fitted magnitudes with a relative std above
     `threshold` are named in `not_determined`; with `hold_undetermined` they are held
-    at the robot's values and the fit repeated (until none is left). Never raises on a
-    failed fit: see `converged` and `message`.
+    at the robot's values and the fit repeated (until none is left). `priors`: Gaussian
+    priors centred on the robot's values, `{group or parameter name: std}` with the std
+    in the parameter's printed unit or `"X%"` of its value (`prior_stds`); a parameter
+    with a prior is fitted (unless held) whether or not the data determine it. Never
+    raises on a failed fit: see `converged` and `message`.
     """
     if not threshold > 0:
         raise ValueError(f"threshold must be positive, got {threshold}")
-    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond)
+    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)
     flagged: dict[str, tuple[float, float]] = {}
     while True:
         over = _undetermined(cal.table, cal.fitted, cal.estimate, cal.std, threshold)
@@ -265,7 +285,7 @@ def calibrate_tree(
             break
         hold = (*hold, *(cal.table[i].name for i in over))
         seconds = cal.seconds
-        cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond)
+        cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)
         cal = cal._replace(seconds=cal.seconds + seconds)
     names = tuple(p.name for p in cal.table if p.name in flagged)
     return cal._replace(
@@ -275,7 +295,7 @@ def calibrate_tree(
     )
 
 
-def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond) -> TreeCalibration:
+def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) -> TreeCalibration:
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
     t0 = time.perf_counter()
@@ -292,9 +312,12 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond) -> TreeC
     target = jnp.asarray(np.asarray(data.markers)[rows, markers])
     scale = jnp.asarray([p.scale for p in table])
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
+    prior = prior_stds(robot, table, priors)
+    has_prior = np.isfinite(prior)
     J = np.asarray(_weighted_jacobian(robot, table, q, rows, markers, sigma, scale))
-    fitted = np.zeros(len(table), bool)
-    fitted[want] = pivoted_subset(J[:, want], rcond)
+    fitted = want & has_prior
+    pivot = want & ~has_prior
+    fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
     fit = _fit(
         robot,
         table,
@@ -305,6 +328,7 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond) -> TreeC
         target,
         sigma,
         scale,
+        jnp.asarray(np.where(has_prior, 1.0 / prior, 0.0), q.dtype),
         max_steps,
     )
     est = np.asarray(fit.estimate)
@@ -320,11 +344,12 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond) -> TreeC
         std=std,
         rms_mm=float(np.sqrt(np.mean(err**2)) * 1e3),
         chi2=float(fit.chi2),
-        dof=int(res.size - fitted.sum()),
+        dof=int(res.size + (fitted & has_prior).sum() - fitted.sum()),
         converged=converged,
         message="" if converged else messages(fit.result)[0],
         fit=fit,
         seconds=time.perf_counter() - t0,
+        prior_std=prior if priors else None,
     )
 
 
@@ -380,16 +405,18 @@ def validate_tree(
     groups: tuple[str, ...] | None = None,
     *,
     progress=None,
+    priors: dict[str, PriorSpec] | None = None,
 ) -> list[Stage]:
     """Calibrate on `train` adding the parameter `groups` in turn and measure the 3-D
     marker error on `test`. Each stage is a calibration of its groups from `robot`'s
     values, as a user would run it (`identify --params`); starting from the previous
     stage's estimate instead lands in a long valley of the near-redundant geometry
-    that Levenberg–Marquardt does not leave within its step budget."""
+    that Levenberg–Marquardt does not leave within its step budget. `priors` as in
+    `calibrate_tree`, for the groups a stage fits."""
     out: list[Stage] = []
     groups = default_groups(robot) if groups is None else groups
     for k in range(1, len(groups) + 1):
-        cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k])
+        cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors)
         e = marker_errors(cal.robot, test) * 1e3
         out.append(
             Stage(

@@ -78,7 +78,8 @@ class LsqFit(eqx.Module):
     - `covariance`: `(P, P)`, `(JᵀWJ)⁻¹` with the stated σ; zero rows/columns for fixed
       parameters, NaN when the normal matrix is rank deficient.
     - `residuals`: `(n, 3)` measured − model, m.
-    - `chi2`: `Σ (residual/σ)²` (plain, not the robust loss).
+    - `chi2`: `Σ (residual/σ)²` (plain, not the robust loss), plus the priors' terms
+      where the fit has priors.
     - `converged`: solver succeeded, model evaluations finite/converged, design well posed.
     - `steps`: solver steps taken.
     - `result`: `RESULTS.successful` exactly when `converged`, else the first check that
@@ -132,6 +133,7 @@ def nonlinear_fit(
     free: tuple[bool, ...] | None = None,
     mask: Float[Array, " P"] | None = None,
     jacobian: Callable[[Float[Array, " P"]], tuple[Array, Array, Array]] | None = None,
+    prior_weight: Float[Array, " P"] | None = None,
     loss: str = "l2",
     huber_delta: float = 1.5,
     max_steps: int = 32,
@@ -161,6 +163,12 @@ def nonlinear_fit(
       call, for a model that computes its Jacobian more cheaply than by one forward
       pass per parameter (e.g. by reverse mode, row by row, when P is large and each row
       has few outputs). `predict` is then not called.
+    - `prior_weight`: optional `(P,)` Gaussian priors centred on `p0`, as `1/std` in the
+      parameter's units (0: no prior). Each fitted parameter with a prior adds the
+      residual `(p0 − p)·weight` to the fit (the maximum a posteriori estimate), so the
+      covariance is the posterior one and a parameter the data do not see keeps its
+      prior std; `chi2` includes those terms. Always an array when given: fits with and
+      without priors then share one program.
     - `loss`: `"l2"` or `"huber"` (residual transform `huber_transform` with threshold
       `huber_delta` in units of σ; covariance then uses the IRLS weights).
     - `max_steps`: LM step budget (fits that hit it are flagged, not raised).
@@ -192,6 +200,7 @@ def nonlinear_fit(
     target = jnp.asarray(target, p0.dtype)
 
     m_free = None if mask is None else jnp.asarray(mask, p0.dtype)[idx]
+    w_prior = None if prior_weight is None else jnp.asarray(prior_weight, p0.dtype)[idx]
 
     def params(y):
         step = s_free * y if m_free is None else s_free * y * m_free
@@ -224,6 +233,13 @@ def nonlinear_fit(
             )(J)
         else:
             rt, Jt = r, J
+        if w_prior is not None:
+            # (p0 − p)/std in units of the prior std: −scale·y·weight (masked)
+            step = s_free if m_free is None else s_free * m_free
+            Jp = -jnp.diag(step * w_prior)
+            rp = Jp @ y
+            rt, Jt = jnp.concatenate([rt, rp]), jnp.concatenate([Jt, Jp])
+            r, J = jnp.concatenate([r, rp]), jnp.concatenate([J, Jp])
         Jt = jnp.where(jnp.isfinite(Jt), Jt, 0.0)
         return rt, (Jt, r, J, pred, ok.astype(y.dtype))
 
@@ -265,7 +281,11 @@ def nonlinear_fit(
     _, r, J, pred, okf = sol.state.aux
     ok = okf > 0.5
     res = target - pred
-    w = huber_weights(r, huber_delta) if loss == "huber" else None
+    w = None
+    if loss == "huber":
+        n_data = target.size
+        w = huber_weights(r[:n_data], huber_delta)
+        w = jnp.concatenate([w, jnp.ones(r.shape[0] - n_data, r.dtype)])  # priors: plain
     if m_free is None:
         cov_y, well = covariance_from_jacobian(J, w)
     else:

@@ -41,6 +41,9 @@ __all__ = [
     "set_vector",
     "parse_groups",
     "default_groups",
+    "PriorSpec",
+    "prior_stds",
+    "parse_priors",
 ]
 
 GROUPS: tuple[str, ...] = (
@@ -249,3 +252,74 @@ def parse_groups(text: str | None, robot: TreeRobot | None = None) -> tuple[str,
     if unknown:
         raise ValueError(f"--params: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     return tuple(g for g in GROUPS if g in names)
+
+
+#: A prior: the std of a group's or a parameter's Gaussian prior, centred on the robot
+#: file's value: a number in the parameter's printed unit (mm, mrad, µrad/(N·m), kg...)
+#: or a string `"X%"`, relative to the robot file's value.
+PriorSpec = float | str
+
+
+def prior_stds(
+    robot: TreeRobot, table: tuple[Parameter, ...], priors: dict[str, PriorSpec] | None
+) -> np.ndarray:
+    """Host-side: `(P,)` the prior std of each parameter of `table` in SI units, `inf`
+    where it has none. `priors` maps group names (`GROUPS`) or parameter names to a
+    `PriorSpec`; a parameter's own entry overrides its group's. Unknown names, stds that
+    are not positive and finite, and relative priors on a parameter whose robot-file
+    value is 0 (an error about zero: give its std in its unit) raise `ValueError`."""
+    out = np.full(len(table), np.inf)
+    if not priors:
+        return out
+    names = [p.name for p in table]
+    unknown = [k for k in priors if k not in GROUPS and k not in names]
+    if unknown:
+        raise ValueError(
+            f"priors: unknown group or parameter(s) {unknown}; groups: {', '.join(GROUPS)}, "
+            "or a parameter's name as printed"
+        )
+    p0 = np.asarray(get_vector(robot, table), float)
+    for i, p in enumerate(table):
+        key = p.name if p.name in priors else p.group if p.group in priors else None
+        if key is None:
+            continue
+        spec = priors[key]
+        if isinstance(spec, str) and spec.strip().endswith("%"):
+            rel = _positive(spec.strip()[:-1], key) / 100.0
+            if p0[i] == 0:
+                raise ValueError(
+                    f"priors: {key}={spec}: {p.name} is 0 in the robot file, so a relative "
+                    f"prior has no size; give its std in {p.unit}"
+                )
+            out[i] = rel * abs(p0[i])
+        else:
+            out[i] = _positive(spec, key) / p.factor
+    return out
+
+
+def _positive(value: Any, key: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"priors: {key}: {value!r} is not a number (or 'X%')") from None
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"priors: {key}: the std must be positive and finite, got {value!r}")
+    return v
+
+
+def parse_priors(text: str | None) -> dict[str, PriorSpec]:
+    """`--prior` text, `NAME=STD[,NAME=STD...]` (NAME a group or a parameter, STD in the
+    parameter's printed unit or `X%` of the robot file's value), to a `priors` mapping;
+    the values are checked against the robot by `prior_stds`."""
+    out: dict[str, PriorSpec] = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise ValueError(
+                f"--prior: {item.strip()!r} is not NAME=STD (e.g. lateral-compliance=50%)"
+            )
+        v = value.strip()
+        out[name.strip()] = v if v.endswith("%") else _positive(v, name.strip())
+    return out

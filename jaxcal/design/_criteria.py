@@ -325,15 +325,14 @@ def host_criteria(
     """Host-side `criteria_from_observation` (same arguments): one compiled program; a
     design that does not determine every parameter is evaluated again outside jit,
     where its null space can be named."""
-    settings = dict(
-        names=names,
-        relative=relative,
-        weights=(float(weights[0]), float(weights[1])),
-        select=select,
+    w = (float(weights[0]), float(weights[1]))
+    c = _criteria_compiled(
+        obs, nominal, sigma, names=names, relative=relative, weights=w, select=select
     )
-    c = _criteria_compiled(obs, nominal, sigma, **settings)
     if not bool(c.full_rank):
-        c = criteria_from_observation(obs, nominal, sigma, **settings)
+        c = criteria_from_observation(
+            obs, nominal, sigma, names=names, relative=relative, weights=w, select=select
+        )
     return c
 
 

@@ -13,6 +13,7 @@ from .._exported import (
 )
 from .._identification.elastogeometric import (
     pivoted_subset as pivoted_subset,
+    scaled_jacobian as scaled_jacobian,
     split_rows as split_rows,
 )
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
