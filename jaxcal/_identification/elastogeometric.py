@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._model.tree_statics import predict_markers
@@ -91,6 +92,10 @@ def _predict(robot: TreeRobot, table, p, q, rows, markers):
     return y[rows, markers], ok
 
 
+# Kept traced on disk (`exported`) while the compilation cache is on: tracing the
+# Jacobian and the fit through the tree's equilibria is most of a warm `identify`'s
+# wait besides the fit itself.
+@exported
 @eqx.filter_jit
 def _weighted_jacobian(robot, table, q, rows, markers, sigma, scale):
     _, _, J = _jacobian(robot, table, get_vector(robot, table), q, rows, markers)
@@ -229,6 +234,7 @@ def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
     return y[rows, markers], ok, J[rows, markers]
 
 
+@exported
 @eqx.filter_jit
 def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, prior_weight, max_steps):
     p0 = get_vector(robot, table)
