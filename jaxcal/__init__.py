@@ -215,6 +215,7 @@ from .design import (
     rank_random_designs as rank_random_designs,
     select_from_pool as select_from_pool,
     select_rows as select_rows,
+    select_tree_rows as select_tree_rows,
     structured_design as structured_design,
     task_information as task_information,
     task_prediction as task_prediction,

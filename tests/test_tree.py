@@ -358,6 +358,63 @@ def test_priors_give_the_posterior(justin, simulated):
         assert cal.std[k] <= plain.std[k] * (1 + 1e-9)
 
 
+def test_rows_selected_for_a_task_with_priors(justin, data):
+    """20 of 120 pool rows chosen for predicting 120 other poses, the joint springs under
+    priors: the posterior's task criterion (mean square marker error) recomputed from
+    its definition, and better than the median random 20-row subset."""
+    groups, priors = ("frames", "joint-compliance"), {"joint-compliance": PRIOR}
+    pool, task = data.subset(np.arange(BLOCK)), data.subset(np.arange(BLOCK, 2 * BLOCK))
+    out = jaxcal.select_tree_rows(
+        justin, pool, 20, criterion="task", groups=groups, priors=priors, task=task
+    )
+    sel = out.selection
+    assert sel.full_rank and len(sel.rows) == 20 and np.isnan(out.efficiency)
+    assert sel.value < np.median(out.random)
+    # C = (Σ_chosen JᵀJ/σ² + diag(1/std²))⁻¹ and trace(C W), W = mean JᵀJ over the task's
+    # seen markers, in SI units, from the Jacobians alone.
+    table = jaxcal.parameter_table(justin, groups)
+    names = [p.name for p in table]
+    cols = np.array([n in out.names for n in names])
+    scale = np.array([p.scale for p in table])[cols]
+    Jp = scaled_jacobian(justin, table, pool)[..., cols] / scale  # per SI unit, over σ
+    rows, _ = jaxcal.internal.observations(pool)
+    chosen = np.isin(rows, sel.rows)
+    Jc = Jp[chosen].reshape(-1, cols.sum())
+    springs = np.array([p.group == "joint-compliance" for p in table])[cols]
+    info = Jc.T @ Jc + np.diag(np.where(springs, (PRIOR * 1e-6) ** -2, 0.0))
+    unit = jaxcal.MarkerData(q=task.q, markers=None, seen=task.seen, sigma=np.ones(len(task.q)))
+    Jt = scaled_jacobian(justin, table, unit)[..., cols] / scale
+    W = np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
+    assert sel.value == pytest.approx(np.trace(np.linalg.solve(info, W)), rel=1e-6)
+
+
+def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
+    # The pool and task of the test above, as files: the same selection, written out.
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    files = {}
+    for name, rows in (("pool", np.arange(BLOCK)), ("task", np.arange(BLOCK, 2 * BLOCK))):
+        part = data.subset(rows)
+        files[name] = tmp_path / f"{name}.csv"
+        jaxcal.write_markers(files[name], part, robot, part.markers)
+    args = ["design", "--robot", "dlr_agile_justin", "--pool", str(files["pool"])]
+    args += ["--select", "20", "--criterion", "task", "--task", str(files["task"])]
+    args += ["--params", "frames,joint-compliance", "--prior", f"joint-compliance={PRIOR}"]
+    out = tmp_path / "chosen.csv"
+    assert main([*args, "--json", "-o", str(out)]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["priors"] == {"joint-compliance": PRIOR} and d["bound"] is None
+    assert d["full_rank"] and d["value"] < d["random_median"]
+    chosen = jaxcal.read_markers(out, robot)
+    pool = jaxcal.read_markers(files["pool"], robot)
+    np.testing.assert_array_equal(chosen.q, pool.q[np.asarray(d["rows"]) - 1])
+    # A FANUC-form robot takes neither option.
+    fanuc = ["design", "--pool", str(DATA.parent / "example_calibration.csv"), "--select", "5"]
+    assert main([*fanuc, "--prior", "k2=1"]) == 2
+    assert "--prior and --params choose rows for a robot given as a kinematic tree" in (
+        capsys.readouterr().err
+    )
+
+
 @pytest.mark.parametrize(
     "priors, needle",
     [

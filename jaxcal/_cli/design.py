@@ -10,7 +10,14 @@ import sys
 import numpy as np
 
 from .._format import format_table
-from .main import add_robot_argument, check_output_path, output_failed, print_json, seed
+from .main import (
+    add_prior_argument,
+    add_robot_argument,
+    check_output_path,
+    output_failed,
+    print_json,
+    seed,
+)
 
 
 def register(sub) -> None:
@@ -130,6 +137,13 @@ def register(sub) -> None:
         default=None,
         metavar="K",
         help="with --pool CANDIDATES.csv: how many of its rows to choose",
+    )
+    add_prior_argument(p)
+    p.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="with --pool and a tree robot: the calibration's parameter groups (as identify)",
     )
     p.add_argument(
         "--task",

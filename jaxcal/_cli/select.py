@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from .._format import format_table
-from .main import output_failed, print_json
+from .main import output_failed, print_json, priors_of
 
 _NAMES = {"det": "log det of the covariance", "trace": "trace of the relative covariance"}
 
@@ -31,6 +31,15 @@ def run_select(args: argparse.Namespace) -> int:
         raise ValueError("--criterion task needs --task TASK.csv")
     if args.task and args.criterion != "task":
         raise ValueError("--task TASK.csv goes with --criterion task")
+    from .._model.robot_files import is_tree_file
+
+    if is_tree_file(args.robot):
+        return _run_tree(args)
+    if args.prior or args.params:
+        raise ValueError(
+            "--prior and --params choose rows for a robot given as a kinematic tree "
+            "(absolute marker data)"
+        )
     robot = load_robot(args.robot)
     pool = read_dataset(args.pool, robot, require_deflection=False, ignore_deflection=True)
     if not 1 <= args.select <= len(pool):
@@ -60,30 +69,86 @@ def run_select(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_tree(args: argparse.Namespace) -> int:
+    """Rows of an absolute-measurement pool for a tree robot's calibration."""
+    from .._identification.parameter_groups import parse_groups
+    from .._markers import read_markers, write_markers
+    from .._model.robot_files import load_tree
+    from ..design import select_tree_rows
+
+    robot = load_tree(args.robot)
+    pool = read_markers(args.pool, robot)
+    if not 1 <= args.select <= len(pool):
+        raise ValueError(f"--select must be in 1..{len(pool)} (the pool's rows), got {args.select}")
+    task = read_markers(args.task, robot) if args.task else None
+    priors = priors_of(args)
+    out = select_tree_rows(
+        robot,
+        pool,
+        args.select,
+        criterion=args.criterion,
+        groups=parse_groups(args.params, robot),
+        priors=priors,
+        task=task,
+        seed=args.seed,
+    )
+    failed = None
+    if args.output:
+        chosen = pool.subset(out.selection.rows)
+        try:
+            write_markers(args.output, chosen, robot, chosen.markers)
+            print(f"wrote {len(chosen)} rows to {args.output}", file=sys.stderr)
+        except OSError as e:
+            failed = e
+    d = {**out.to_dict(), "priors": priors}
+    for key in ("bound", "efficiency"):
+        d[key] = None if not np.isfinite(d[key]) else d[key]
+    if args.json:
+        print_json(d)
+    else:
+        _report(args, out, d)
+    if failed:
+        return output_failed("design", failed, "the chosen rows are printed above")
+    return 0
+
+
 def _report(args, out, d) -> None:
     crit = args.criterion
     unit = "mm² (mean square task error)" if crit == "task" else _NAMES[crit]
-    print(
-        f"{args.select} of {args.pool}'s rows for {crit} ({unit}), parameters: "
-        f"{', '.join(n.split('_')[0] for n in out.names)}"
+    if crit == "trace" and "priors" in d:  # tree: variances in typical sizes
+        unit = "trace of the covariance in typical sizes"
+    tree = "priors" in d  # a tree robot's calibration: its parameters by count
+    said = (
+        f"{len(out.names)} calibration parameters"
+        if tree
+        else f"parameters: {', '.join(n.split('_')[0] for n in out.names)}"
     )
+    print(f"{args.select} of {args.pool}'s rows for {crit} ({unit}), {said}")
     rows = [int(r) for r in d["rows"]]
     print(f"rows (1-based): {', '.join(map(str, rows))}")
     to_unit = 1e6 if crit == "task" else 1.0  # the task's m² printed in mm²
     median = d["random_median"]
     table = [
         ["chosen rows", d["value"] * to_unit],
-        ["bound (any rows of the pool)", d["bound"] * to_unit],
+        ["bound (any rows of the pool)", "-" if d["bound"] is None else d["bound"] * to_unit],
         [
             f"median of {d['random_subsets']} random subsets",
             None if median is None else median * to_unit,
         ],
     ]
     print(format_table(["criterion", "value"], table))
+    eff = d["efficiency"]
     print(
-        f"efficiency {d['efficiency']:.3f} against the pool's bound; "
-        f"{d['exchanges']} exchanges after the greedy start"
+        (
+            f"efficiency {eff:.3f} against the pool's bound; "
+            if eff is not None
+            else "no bound with priors (it holds for the data's information alone); "
+        )
+        + f"{d['exchanges']} exchanges after the greedy start"
         + ("" if d["full_rank"] else "; the chosen rows do NOT determine every parameter")
     )
+    if d.get("priors"):
+        said = ", ".join(f"{k} ± {v}" for k, v in d["priors"].items())
+        print(f"with Gaussian priors centred on the robot file's values: {said}")
     if crit == "task" and np.isfinite(d["value"]):
         print(f"predicted RMS task error {1e3 * np.sqrt(d['value']):.4g} mm")

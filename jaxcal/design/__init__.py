@@ -51,6 +51,7 @@ from ._select import (
     select_from_pool as select_from_pool,
     select_rows as select_rows,
 )
+from ._select_tree import select_tree_rows as select_tree_rows
 from ._task import (
     TaskPrediction as TaskPrediction,
     task_information as task_information,

@@ -18,6 +18,11 @@ improves the criterion by more than `tol` (relative). Every candidate swap is ev
 exactly, batched over the pool (host-side numpy, `p` ≲ 200): an exact k-subset, not a
 rounded approximate design.
 
+**Priors.** `prior` `(p,)` adds a Gaussian prior's information `diag(prior)` (`1/std²`
+in the columns' units) to every subset's: `M(S) = diag(prior) + Σ_{c∈S} A_cᵀ A_c / σ_c²`,
+the posterior's, so that k rows can be chosen for a model with more parameters than k
+rows determine (a tree robot's calibration with priors, `select_tree_rows`).
+
 **Quality.** `pool_bound` is the approximate-design bound of the pool (as
 `design/_bound.py` for generated candidates: the multiplicative algorithm, rigorous at
 any iterate), so a selection is stated as its efficiency: `bound / value` for trace and
@@ -43,6 +48,7 @@ __all__ = [
     "subset_values",
     "PoolSelection",
     "select_from_pool",
+    "selection_efficiency",
 ]
 
 SELECT_CRITERIA: tuple[str, ...] = ("det", "trace", "task")
@@ -96,10 +102,11 @@ def _with_rows(inv, criterion: str, W: np.ndarray, A: np.ndarray) -> np.ndarray:
     return float(np.sum(Minv * W)) - np.trace(np.linalg.solve(S, T), axis1=1, axis2=2)
 
 
-def _prepared(obs, sigma, criterion: str, weight):
+def _prepared(obs, sigma, criterion: str, weight, prior=None):
     """Checked arguments as the algorithms use them: `A` `(n, r, p)` the rows over σ with
-    each column scaled to unit norm over the pool (for conditioning), the `scale`, and
-    the criterion's weight matrix in the scaled columns (`I` for det, unused)."""
+    each column scaled to unit norm over the pool (for conditioning), the `scale`, the
+    criterion's weight matrix in the scaled columns (`I` for det, unused) and the prior's
+    information matrix in them (zero without a prior)."""
     obs = np.asarray(obs, float)
     if obs.ndim != 3:
         raise ValueError(f"obs must have shape (n, r, p), got {obs.shape}")
@@ -111,8 +118,15 @@ def _prepared(obs, sigma, criterion: str, weight):
         raise ValueError(f"the task criterion needs weight (the task's W) of shape ({p}, {p})")
     if not (np.all(np.isfinite(obs)) and np.all(sigma > 0)):
         raise ValueError("obs must be finite and sigma positive")
+    if prior is None:
+        prior = np.zeros(p)
+    prior = np.asarray(prior, float)
+    if prior.shape != (p,) or not (np.all(np.isfinite(prior)) and np.all(prior >= 0)):
+        raise ValueError(f"prior must be ({p},) finite and non-negative (1/std², 0: none)")
     A = obs / sigma[:, None, None]
-    scale = np.linalg.norm(A.reshape(-1, p), axis=0)
+    # The pool's and the prior's information together: a column the data barely see is
+    # scaled by its prior, not blown up to a unit norm of round-off.
+    scale = np.sqrt(np.sum(A.reshape(-1, p) ** 2, axis=0) + prior)
     scale = np.where(scale > 0, scale, 1.0)
     # The criteria change by constants: det by a fixed term, trace and task not at all
     # with W scaled alike (`_unscale`).
@@ -122,7 +136,7 @@ def _prepared(obs, sigma, criterion: str, weight):
         W = np.asarray(weight, float) / np.outer(scale, scale)
     else:
         W = np.eye(p)
-    return A / scale, scale, W
+    return A / scale, scale, W, np.diag(prior / scale**2)
 
 
 def select_rows(
@@ -135,12 +149,14 @@ def select_rows(
     start: np.ndarray | None = None,
     tol: float = 1e-9,
     max_exchanges: int = 1000,
+    prior: np.ndarray | None = None,
 ) -> Selection:
     """The k rows of the pool `obs` `(n, r, p)` (noise `sigma` `(n,)`, same units as
     `obs`'s rows) that minimise `criterion` (`SELECT_CRITERIA`; `weight` is the task's
     `W` `(p, p)` for `"task"`), by greedy start (or the given `start` rows) and Fedorov
-    exchange (module docstring). Raises `ValueError` for bad arguments."""
-    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    exchange (module docstring); `prior` `(p,)` a Gaussian prior's information (`1/std²`
+    in `obs`'s column units, 0 where none). Raises `ValueError` for bad arguments."""
+    A, scale, Wd, P0 = _prepared(obs, sigma, criterion, weight, prior)
     n, _, p = A.shape
     if not 1 <= k <= n:
         raise ValueError(f"k must be in 1..{n} (the pool's rows), got {k}")
@@ -151,7 +167,7 @@ def select_rows(
 
     if start is None:
         chosen: list[int] = []
-        M = np.zeros((p, p))
+        M = P0.copy()
         for _ in range(k):
             free = np.setdiff1d(np.arange(n), chosen)
             base = _inverse(M + ridge)
@@ -163,7 +179,7 @@ def select_rows(
         chosen = [int(i) for i in np.unique(np.asarray(start, int))]
         if len(chosen) != k or min(chosen) < 0 or max(chosen) >= n:
             raise ValueError(f"start must be {k} distinct pool rows")
-        M = info[chosen].sum(0)
+        M = P0 + info[chosen].sum(0)
     full0 = _inverse(M + ridge)
     assert full0 is not None
     value = start_value = _value(full0, criterion, Wd)
@@ -220,14 +236,15 @@ def subset_values(
     *,
     criterion: str = "det",
     weight: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
 ) -> np.ndarray:
     """The criterion of each row subset of the pool (`select_rows`' arguments; `inf`
     where a subset does not determine every parameter), the pool prepared once."""
-    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    A, scale, Wd, P0 = _prepared(obs, sigma, criterion, weight, prior)
     info = np.einsum("nrp,nrq->npq", A, A)
     out = np.full(len(subsets), np.inf)
     for i, rows in enumerate(subsets):
-        inv = _determined(info[np.asarray(rows)].sum(0))
+        inv = _determined(P0 + info[np.asarray(rows)].sum(0))
         if inv is not None:
             out[i] = _unscale(_value(inv, criterion, Wd), criterion, scale)
     return out
@@ -246,7 +263,7 @@ def pool_bound(
     arguments): the pool's approximate optimum, by the multiplicative algorithm
     `w_c ← w_c (d_c/φ)^λ`, bounded at the last iterate by the equivalence theorem (trace
     and task: `φ²/max d / k`; det: `φ + p log(p/max d) − p log k`)."""
-    A, scale, Wd = _prepared(obs, sigma, criterion, weight)
+    A, scale, Wd, _ = _prepared(obs, sigma, criterion, weight)
     n, _, p = A.shape
     W = None if criterion == "det" else Wd
     w = np.full(n, 1.0 / n)
@@ -302,7 +319,10 @@ class PoolSelection:
         }
 
 
-def _efficiency(criterion: str, value: float, bound: float, p: int) -> float:
+def selection_efficiency(criterion: str, value: float, bound: float, p: int) -> float:
+    """A selection's efficiency against the pool's bound (`pool_bound`): `bound/value`
+    for trace and task, the D-efficiency `exp((bound − value)/p)` for det; 0 for a
+    selection that does not determine every parameter."""
     if not np.isfinite(value):
         return 0.0
     if criterion == "det":
@@ -350,4 +370,6 @@ def select_from_pool(
     subsets = [rng.choice(len(pool), k, replace=False) for _ in range(random_subsets)]
     rand = subset_values(obs, sigma, subsets, criterion=criterion, weight=W)
     p = obs.shape[-1]
-    return PoolSelection(sel, names, bound, _efficiency(criterion, sel.value, bound, p), rand)
+    return PoolSelection(
+        sel, names, bound, selection_efficiency(criterion, sel.value, bound, p), rand
+    )

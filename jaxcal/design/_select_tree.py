@@ -1,0 +1,106 @@
+"""Which k rows of an absolute-measurement pool to measure for a tree robot's
+calibration: `select_rows` on the rows' marker Jacobians, with the calibration's
+Gaussian priors.
+
+Each pool row's observation matrix is the Jacobian of its seen marker coordinates
+(`scaled_jacobian`: σ-weighted, each column in units of its parameter's typical size)
+in the parameters of the calibration's groups. Parameters with a prior are always in
+(their prior's information, `(scale/std)²`, is added to every subset's); of the others,
+those the whole pool determines (QR with column pivoting, as `calibrate_tree` decides
+them) are in and the rest are named and left out. With priors a subset of fewer rows
+than parameters still has a posterior covariance, which is what makes a 10–50 row
+selection for Agile Justin's ~100 parameters meaningful.
+
+The task criterion's `W` is the mean, over the task rows' seen markers, of `JᵀJ` of
+the 3-D marker position (m per parameter unit): `trace(C W)` is the mean square marker
+error (m²) the calibration leaves on the task's poses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._identification.elastogeometric import observations, pivoted_subset, scaled_jacobian
+from .._identification.parameter_groups import (
+    PriorSpec,
+    default_groups,
+    parameter_table,
+    prior_stds,
+)
+from .._markers import MarkerData
+from .._model.tree import TreeRobot
+from ._select import (
+    SELECT_CRITERIA,
+    PoolSelection,
+    pool_bound,
+    select_rows,
+    selection_efficiency,
+    subset_values,
+)
+
+__all__ = ["select_tree_rows"]
+
+
+def _row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
+    """`(n, 3K, P)`: each row's seen marker coordinates' Jacobian rows, zero for a
+    marker not seen (a zero row carries no information)."""
+    rows, markers = observations(data)
+    n, K = np.asarray(data.seen).shape
+    out = np.zeros((n, K, 3, J.shape[-1]))
+    out[rows, markers] = J
+    return out.reshape(n, 3 * K, -1)
+
+
+def select_tree_rows(
+    robot: TreeRobot,
+    pool: MarkerData,
+    k: int,
+    *,
+    criterion: str = "det",
+    groups: tuple[str, ...] | None = None,
+    priors: dict[str, PriorSpec] | None = None,
+    task: MarkerData | None = None,
+    random_subsets: int = 200,
+    seed: int = 0,
+) -> PoolSelection:
+    """Host-side: the `k` rows of `pool` (its poses, seen markers and σ; measured
+    markers, if any, ignored) to measure for the calibration of `groups` (default
+    `default_groups(robot)`) with `priors` (as `calibrate_tree`), by `criterion`:
+    `"det"`, `"trace"` (variances in units of each parameter's typical size) or
+    `"task"` (`task`: the poses the calibrated model will predict). Linearised at
+    `robot`'s values. With the criterion of `random_subsets` random k-row subsets for
+    comparison, and without priors the pool's bound and the selection's efficiency
+    against it (`nan` with priors: the bound holds for the data's information alone)."""
+    if criterion not in SELECT_CRITERIA:
+        raise ValueError(f"criterion must be one of {SELECT_CRITERIA}, got {criterion!r}")
+    if criterion == "task" and task is None:
+        raise ValueError("the task criterion needs the task's rows (task=...)")
+    if not 1 <= k <= len(pool.q):
+        raise ValueError(f"k must be in 1..{len(pool.q)} (the pool's rows), got {k}")
+    groups = default_groups(robot) if groups is None else groups
+    table = parameter_table(robot, groups)
+    std = prior_stds(robot, table, priors)
+    has_prior = np.isfinite(std)
+    J = scaled_jacobian(robot, table, pool)  # (m, 3, P): σ-weighted, typical-size units
+    cols = has_prior.copy()
+    cols[~has_prior] = pivoted_subset(J.reshape(-1, len(table))[:, ~has_prior])
+    obs = _row_blocks(J, pool)[:, :, cols]
+    scale = np.array([p.scale for p in table])
+    prior = np.where(has_prior, (scale / np.where(has_prior, std, 1.0)) ** 2, 0.0)[cols]
+    W = None
+    if criterion == "task":
+        assert task is not None
+        unit = MarkerData(q=task.q, markers=None, seen=task.seen, sigma=np.ones(len(task.q)))
+        Jt = scaled_jacobian(robot, table, unit)[:, :, cols]  # m per typical size
+        W = np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
+    ones = np.ones(len(pool.q))  # obs is already σ-weighted
+    sel = select_rows(obs, ones, k, criterion=criterion, weight=W, prior=prior)
+    rng = np.random.default_rng(seed)
+    subsets = [rng.choice(len(pool.q), k, replace=False) for _ in range(random_subsets)]
+    rand = subset_values(obs, ones, subsets, criterion=criterion, weight=W, prior=prior)
+    names = tuple(p.name for p, c in zip(table, cols, strict=True) if c)
+    if has_prior.any():
+        return PoolSelection(sel, names, float("nan"), float("nan"), rand)
+    bound = pool_bound(obs, ones, k, criterion=criterion, weight=W)
+    eff = selection_efficiency(criterion, sel.value, bound, obs.shape[-1])
+    return PoolSelection(sel, names, bound, eff, rand)
