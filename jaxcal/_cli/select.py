@@ -52,21 +52,12 @@ def run_select(args: argparse.Namespace) -> int:
         robot, pool, args.select, criterion=args.criterion, task=task, model=model, seed=args.seed
     )
     chosen = pool.subset(out.selection.rows)
-    failed = None
-    if args.output:
-        try:
-            write_dataset(args.output, chosen, deflection=False, sigma=True)
-            print(f"wrote {len(chosen)} rows to {args.output}", file=sys.stderr)
-        except OSError as e:
-            failed = e
-    d = out.to_dict()
-    if args.json:
-        print_json(d)
-    else:
-        _report(args, out, d)
-    if failed:
-        return output_failed("design", failed, "the chosen rows are printed above")
-    return 0
+
+    def write(path: str) -> int:
+        write_dataset(path, chosen, deflection=False, sigma=True)
+        return len(chosen)
+
+    return _finish(args, out, out.to_dict(), write)
 
 
 def _run_tree(args: argparse.Namespace) -> int:
@@ -92,17 +83,27 @@ def _run_tree(args: argparse.Namespace) -> int:
         task=task,
         seed=args.seed,
     )
-    failed = None
-    if args.output:
-        chosen = pool.subset(out.selection.rows)
-        try:
-            write_markers(args.output, chosen, robot, chosen.markers)
-            print(f"wrote {len(chosen)} rows to {args.output}", file=sys.stderr)
-        except OSError as e:
-            failed = e
     d = {**out.to_dict(), "priors": priors}
     for key in ("bound", "efficiency"):
         d[key] = None if not np.isfinite(d[key]) else d[key]
+
+    def write(path: str) -> int:
+        chosen = pool.subset(out.selection.rows)
+        write_markers(path, chosen, robot, chosen.markers)
+        return len(chosen)
+
+    return _finish(args, out, d, write)
+
+
+def _finish(args, out, d: dict, write) -> int:
+    """Write the chosen rows (`write(path)` → their count) where `-o` says, print the
+    report (table or `--json`), and say a failed write after it."""
+    failed = None
+    if args.output:
+        try:
+            print(f"wrote {write(args.output)} rows to {args.output}", file=sys.stderr)
+        except OSError as e:
+            failed = e
     if args.json:
         print_json(d)
     else:
