@@ -74,6 +74,10 @@ PIVOT_RCOND = 1e-4
 #: units of its typical size (`Parameter.scale`: 1 mm, 1 mrad, 10 µrad/(N·m)).
 LM_TOL = 1e-6
 
+#: ... or when the next step predicts a χ² decrease below this: the estimate would move
+#: by less than 0.03 standard deviations along it (`StallingLevenbergMarquardt`).
+LM_CHI2_TOL = 1e-3
+
 #: Groups whose parameters are physical magnitudes (a spring, a mass, a law's
 #: constant): their relative standard deviation says whether the data determine them.
 #: Frame and geometric parameters are errors about zero, decided by the pivoting alone.
@@ -250,6 +254,7 @@ def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, prior_weigh
         max_steps=max_steps,
         rtol=LM_TOL,
         atol=LM_TOL,
+        chi2_tol=LM_CHI2_TOL,
     )
 
 

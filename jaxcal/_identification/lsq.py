@@ -53,9 +53,34 @@ class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
     ones). A proposal within the tolerance after a rejection means no further progress
     is possible at the requested precision; the last accepted point is the answer.
     Under `vmap` the batch runs until its slowest member stops, so this matters.
+
+    With `chi2_tol > 0` it also stops once the step proposed after an accepted one
+    predicts (on the linearised residual) a decrease of χ² below `chi2_tol`: further
+    steps can only move the estimate along directions the data hardly constrain (by
+    less than `sqrt(chi2_tol)` standard deviations along the step). A model with many
+    weakly determined parameters otherwise spends half its steps there (a tree robot's
+    full calibration: χ² equal to 1e-7 relative after 25 of 51 steps).
     """
 
+    chi2_tol: float
+
+    def __init__(self, rtol, atol, linear_solver, chi2_tol: float = 0.0):
+        super().__init__(rtol=rtol, atol=atol, linear_solver=linear_solver)
+        self.chi2_tol = chi2_tol
+
+    def step(self, fn, y, args, options, state, tags):
+        y, state, aux = super().step(fn, y, args, options, state, tags)
+        if self.chi2_tol > 0:
+            # The step proposed from the point just accepted, on its linearised residual.
+            r = state.f_info.residual
+            after = r + state.f_info.jac.mv(state.y_eval - y)
+            predicted = jnp.sum(r**2) - jnp.sum(after**2)  # χ² units: the loss is ½Σr²
+            flat = (state.num_steps_since_acceptance == 0) & (predicted < self.chi2_tol)
+            state = eqx.tree_at(lambda s: s.terminate, state, state.terminate | flat)
+        return y, state, aux
+
     def terminate(self, fn, y, args, options, state, tags):
+        # `y` is the point before the last step (optimistix's loop passes it so).
         done, result = super().terminate(fn, y, args, options, state, tags)
         step = state.y_eval - y  # y is one array here (the scaled free parameters)
         tiny = self.norm(step) < self.atol + self.rtol * self.norm(y)
@@ -63,12 +88,14 @@ class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
         return done | stalled, result
 
 
-def levenberg_marquardt(rtol: float, atol: float) -> StallingLevenbergMarquardt:
+def levenberg_marquardt(
+    rtol: float, atol: float, chi2_tol: float = 0.0
+) -> StallingLevenbergMarquardt:
     """The one Levenberg–Marquardt solver of jaxcal (identify, Monte-Carlo, discover):
-    the stall check above, and QR for its linear steps from `_linalg.solvers` (by
+    the stall checks above, and QR for its linear steps from `_linalg.solvers` (by
     default Householder in plain jnp: fits run vmapped, and batched LAPACK kernels can
     deadlock XLA's CPU pool, see `_linalg/dense.py`)."""
-    return StallingLevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=qr_solver())  # pyright: ignore[reportCallIssue]
+    return StallingLevenbergMarquardt(rtol, atol, qr_solver(), chi2_tol)
 
 
 class LsqFit(eqx.Module):
@@ -139,6 +166,7 @@ def nonlinear_fit(
     max_steps: int = 32,
     rtol: float = 1e-5,
     atol: float = 1e-5,
+    chi2_tol: float = 0.0,
 ) -> LsqFit:
     """Weighted nonlinear least squares `min Σ ρ((target − predict(p))/σ)` with
     optimistix Levenberg–Marquardt, started at `p0`.
@@ -172,6 +200,8 @@ def nonlinear_fit(
     - `loss`: `"l2"` or `"huber"` (residual transform `huber_transform` with threshold
       `huber_delta` in units of σ; covariance then uses the IRLS weights).
     - `max_steps`: LM step budget (fits that hit it are flagged, not raised).
+    - `chi2_tol`: also stop once the next step predicts a χ² decrease below it
+      (`StallingLevenbergMarquardt`; 0: off).
 
     Returns an `LsqFit`. Pure and vmappable: batch over `target` with `jax.vmap`.
 
@@ -267,7 +297,7 @@ def nonlinear_fit(
         return residual(y)
 
     y0 = jnp.zeros(idx.shape[0], p0.dtype)
-    solver = levenberg_marquardt(rtol, atol)
+    solver = levenberg_marquardt(rtol, atol, chi2_tol)
     # optimistix traces the residual twice (shape inference under `eval_shape`, which
     # runs in an empty abstract-mesh context, and the solve itself). Under one context
     # the model's jitted inner pieces (`batch_roots`) are traced once and reused.

@@ -12,6 +12,7 @@ from .._exported import (
     set_export_directory as set_export_directory,
 )
 from .._identification.elastogeometric import (
+    LM_CHI2_TOL as LM_CHI2_TOL,
     observations as observations,
     pivoted_subset as pivoted_subset,
     scaled_jacobian as scaled_jacobian,
