@@ -205,7 +205,7 @@ cells = [
         "and 2 (`jaxcal validate tests/data/dlr_agile_justin.csv --robot "
         "dlr_agile_justin --seed 1`; all three in `benchmarks/README.md`) the frames-only "
         "mean is 19.45 and 20.24 mm, and the full calibration gives 3.02 / 1.54 / 8.26 "
-        "and 2.85 / 1.39 / 8.93 mm. Its mean is below the published 3.12 mm on all three "
+        "and 2.84 / 1.39 / 8.88 mm. Its mean is below the published 3.12 mm on all three "
         "splits, its max below the published 8.23 mm on this one only. So read the "
         'comparison as "the same or slightly better on average", not as a ranking.',
     ),
