@@ -519,7 +519,7 @@ def test_cli_identify_names_springs_the_data_do_not_determine(identified, capsys
 
 
 def test_cli_identify_states_its_priors(identified, capsys):
-    part, _, plain = identified
+    part, _, _ = identified
     args = ["identify", str(part), "--robot", "dlr_agile_justin", "--no-advice"]
     args += ["--params", "frames,joint-compliance", "--prior", f"joint-compliance={PRIOR}"]
     assert main([*args, "--json"]) == 0

@@ -115,10 +115,10 @@ def _finish(args, out, d: dict, write) -> int:
 
 def _report(args, out, d) -> None:
     crit = args.criterion
-    unit = "mm² (mean square task error)" if crit == "task" else _NAMES[crit]
-    if crit == "trace" and "priors" in d:  # tree: variances in typical sizes
-        unit = "trace of the covariance in typical sizes"
     tree = "priors" in d  # a tree robot's calibration: its parameters by count
+    unit = "mm² (mean square task error)" if crit == "task" else _NAMES[crit]
+    if crit == "trace" and tree:  # variances in units of the typical sizes
+        unit = "trace of the covariance in typical sizes"
     said = (
         f"{len(out.names)} calibration parameters"
         if tree

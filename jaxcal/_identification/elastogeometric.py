@@ -56,6 +56,7 @@ __all__ = [
     "TreeCalibration",
     "Stage",
     "pivoted_subset",
+    "fitted_parameters",
     "calibrate_tree",
     "validate_tree",
     "split_rows",
@@ -157,6 +158,18 @@ def pivoted_subset(
         v = A[:, k] / norms[k]
         A -= np.outer(v, v @ A)
     return chosen
+
+
+def fitted_parameters(
+    J: np.ndarray, want: np.ndarray, has_prior: np.ndarray, rcond: float = PIVOT_RCOND
+) -> np.ndarray:
+    """Host-side: `(P,)` bools, the parameters a calibration fits of those it `want`s:
+    every one with a prior (the prior determines what the data do not), and of the
+    others those `pivoted_subset` picks from the scaled Jacobian `J` `(m, P)`."""
+    fitted = want & has_prior
+    pivot = want & ~has_prior
+    fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
+    return fitted
 
 
 class TreeCalibration(NamedTuple):
@@ -326,9 +339,7 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
     J = np.asarray(_weighted_jacobian(robot, table, q, rows, markers, sigma, scale))
-    fitted = want & has_prior
-    pivot = want & ~has_prior
-    fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
+    fitted = fitted_parameters(J, want, has_prior, rcond)
     fit = _fit(
         robot,
         table,

@@ -6,8 +6,8 @@ Each pool row's observation matrix is the Jacobian of its seen marker coordinate
 (`scaled_jacobian`: σ-weighted, each column in units of its parameter's typical size)
 in the parameters of the calibration's groups. Parameters with a prior are always in
 (their prior's information, `(scale/std)²`, is added to every subset's); of the others,
-those the whole pool determines (QR with column pivoting, as `calibrate_tree` decides
-them) are in and the rest are named and left out. With priors a subset of fewer rows
+those the whole pool determines are in and the rest are named and left out: the choice
+`calibrate_tree` makes (`fitted_parameters`). With priors a subset of fewer rows
 than parameters still has a posterior covariance, which is what makes a 10–50 row
 selection for Agile Justin's ~100 parameters meaningful.
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._identification.elastogeometric import observations, pivoted_subset, scaled_jacobian
+from .._identification.elastogeometric import fitted_parameters, observations, scaled_jacobian
 from .._identification.parameter_groups import (
     PriorSpec,
     default_groups,
@@ -82,8 +82,7 @@ def select_tree_rows(
     std = prior_stds(robot, table, priors)
     has_prior = np.isfinite(std)
     J = scaled_jacobian(robot, table, pool)  # (m, 3, P): σ-weighted, typical-size units
-    cols = has_prior.copy()
-    cols[~has_prior] = pivoted_subset(J.reshape(-1, len(table))[:, ~has_prior])
+    cols = fitted_parameters(J.reshape(-1, len(table)), np.ones(len(table), bool), has_prior)
     obs = _row_blocks(J, pool)[:, :, cols]
     scale = np.array([p.scale for p in table])
     prior = np.where(has_prior, (scale / np.where(has_prior, std, 1.0)) ** 2, 0.0)[cols]
