@@ -38,6 +38,7 @@ _DIR: Path | None = None
 _LOADED: dict[str, Any] = {}
 _KEYS: dict[tuple, str] = {}
 _UNEXPORTABLE = b"unexportable"
+_ARRAY = "<jaxcal exported array>"  # an output array's place in a stored skeleton
 
 
 def export_directory() -> Path | None:
@@ -119,12 +120,14 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         if got == _UNEXPORTABLE:
             return fn(*args)
         run, skeleton = got
-        flat, out_def = jax.tree.flatten(skeleton, is_leaf=lambda x: x is None)
+        flat, out_def = jax.tree.flatten(skeleton)
         # Committed and uncommitted arguments lower to different calls (a second compile
         # of the whole program): commit them all to the default device.
         device = jax.devices()[0]
         outs = iter(run(*jax.device_put(arrays, device)))
-        return jax.tree.unflatten(out_def, [next(outs) if x is None else x for x in flat])
+        return jax.tree.unflatten(
+            out_def, [next(outs) if isinstance(x, str) and x == _ARRAY else x for x in flat]
+        )
 
     return call
 
@@ -150,7 +153,8 @@ def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
         it = iter(xs)
         full = [next(it) if a else x for x, a in zip(leaves, is_arr, strict=True)]
         out = fn(*jax.tree.unflatten(treedef, full))
-        skeleton.append(eqx.filter(out, eqx.is_array, inverse=True))
+        # The output's structure with its arrays marked (a `None` in it stays `None`).
+        skeleton.append(jax.tree.map(lambda x: _ARRAY if eqx.is_array(x) else x, out))
         return jax.tree.leaves(eqx.filter(out, eqx.is_array))
 
     try:

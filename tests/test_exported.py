@@ -17,12 +17,14 @@ class Out(eqx.Module):
     value: jax.Array
     total: jax.Array
     label: str = eqx.field(static=True)
+    absent: jax.Array | None = None  # an optional output, `None` here, stays `None`
+    last: jax.Array | None = None
 
 
 @eqx.filter_jit
 def _f(z, w, power: int):
     TRACES.append(power)
-    return Out(z**power * w + 1.0, jnp.sum(z), f"power {power}")
+    return Out(z**power * w + 1.0, jnp.sum(z), f"power {power}", None, z[-1])
 
 
 f = exported(_f)
@@ -56,6 +58,7 @@ def test_stored_program_matches_and_skips_tracing(store):
     again = f(z + 1.0, w, 3)  # same shapes and statics: the stored program
     assert TRACES == []
     np.testing.assert_allclose(np.asarray(again.value), np.asarray((z + 1.0) ** 3 * 0.5 + 1))
+    assert again.absent is None and float(again.last) == 4.0
     # Another static value or shape is another program.
     f(z, w, 2)
     f(jnp.arange(5.0), w, 3)

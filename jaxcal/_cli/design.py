@@ -59,7 +59,9 @@ def register(sub) -> None:
         "--criterion",
         choices=("trace", "det", "weighted", "task"),
         default="trace",
-        help="O1 trace, O2 determinant or O3 weighted sum of the covariance (default trace)",
+        help="O1 trace, O2 determinant or O3 weighted sum of the covariance (default "
+        "trace), or the task's mean square error after calibration (with --task; over the "
+        "physical parameters)",
     )
     p.add_argument(
         "--parameters",
@@ -227,10 +229,10 @@ def _shares(c) -> dict[str, float]:
     return share_of_trace(c) if bool(c.full_rank) else dict.fromkeys(c.names, float("nan"))
 
 
-def _std_rows(c):
+def _std_rows(c, share: dict[str, float] | None = None):
     from .._parameters import parameter_units
 
-    share = _shares(c)
+    share = _shares(c) if share is None else share
     return [
         [n, parameter_units(n), float(v), float(s), float(r), 100 * share[n]]
         for n, v, s, r in zip(c.names, c.nominal, c.std, c.relative_std, strict=True)
@@ -314,7 +316,7 @@ def _pool(text: str) -> int | str:
 
 
 def run_design(args: argparse.Namespace) -> int:
-    from .._io import write_dataset
+    from .._io import read_dataset, write_dataset
     from .._robot import load_robot
     from ..design._criteria import resolve_parameters
     from ..design._optimise import optimise_design
@@ -326,12 +328,17 @@ def run_design(args: argparse.Namespace) -> int:
         return run_select(args)
     if args.select is not None:
         raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
+    task = None
     if args.criterion == "task":
-        raise ValueError(
-            "--criterion task chooses rows of a candidate file (--pool CANDIDATES.csv "
-            "--select K --task TASK.csv); for a given design, evaluate --task says its task "
-            "error"
-        )
+        if not args.task:
+            raise ValueError("--criterion task needs --task TASK.csv (the work to calibrate for)")
+        if args.parameters != "aggregated":
+            raise ValueError(
+                "--criterion task weighs every physical parameter by what the task needs: "
+                "leave out --parameters"
+            )
+    elif args.task:
+        raise ValueError("--task TASK.csv goes with --criterion task")
     n, reps = _sizes(args)
     if args.starts < 1 or args.steps < 1 or args.pool < 0 or args.bound_pool < 0:
         raise ValueError("--starts and --steps must be positive, --pool and --bound-pool >= 0")
@@ -339,6 +346,9 @@ def run_design(args: argparse.Namespace) -> int:
         raise ValueError(f"--level-gap must be >= 0, got {args.level_gap}")
     robot = load_robot(args.robot)
     pset, _ = resolve_parameters(robot, args.parameters)
+    if args.criterion == "task":
+        task = read_dataset(args.task, robot, require_deflection=False, ignore_deflection=True)
+        pset = "physical"
     G = args.groups if args.groups is not None else (3 if pset == "aggregated" else None)
     if G is not None and not 1 <= G <= n:
         raise ValueError(f"--groups must be in 1..{n} (distinct configurations), got {G}")
@@ -368,6 +378,7 @@ def run_design(args: argparse.Namespace) -> int:
         level_gap_deg=args.level_gap,
         q2_levels=_levels(args.q2_levels),
         bound_pool=args.bound_pool,
+        task=task,
     )
     failed = None
     if args.output:
@@ -422,10 +433,17 @@ def _report_design(args: argparse.Namespace, d, reps: int) -> int:
         )
         return 0 if d.feasible else 1
     q = np.rad2deg(d.q)
-    print(
-        f"{d.criterion} ({'relative' if c.relative else 'absolute'}, {args.parameters}, "
-        f"{d.model} model) = {d.value:.6g}   feasible: {d.feasible}   {d.seconds:.1f} s"
-    )
+    if d.criterion == "task":
+        print(
+            f"task (mean square error left on {args.task}, {d.model} model) = "
+            f"{d.value * 1e6:.6g} mm²: predicted RMS task error {np.sqrt(d.value) * 1e3:.4g} mm"
+            f"   feasible: {d.feasible}   {d.seconds:.1f} s"
+        )
+    else:
+        print(
+            f"{d.criterion} ({'relative' if c.relative else 'absolute'}, {args.parameters}, "
+            f"{d.model} model) = {d.value:.6g}   feasible: {d.feasible}   {d.seconds:.1f} s"
+        )
     if d.bound is not None:
         print(
             f"approximate-design bound {d.bound.value:.6g} over {d.bound.pool_size} candidates"
@@ -446,7 +464,11 @@ def _report_design(args: argparse.Namespace, d, reps: int) -> int:
     heads = ["#", *(f"q{i}_deg" for i in range(1, 7)), "fx_N", "fy_N", "fz_N"]
     print(format_table(heads, rows))
     print()
-    print(format_table(_STD_HEADS, _std_rows(c)))
+    if d.criterion == "task":
+        heads = [*_STD_HEADS[:-1], "task_share_%"]
+        print(format_table(heads, _std_rows(c, d.shares())))
+    else:
+        print(format_table(_STD_HEADS, _std_rows(c)))
     return 0 if d.feasible else 1
 
 

@@ -14,8 +14,9 @@ configurations are added to the pool, so the efficiency of a design is never abo
 multiplicative algorithm (Silvey–Titterington–Torsney; Yu 2010), `w_c ← w_c·(d_c/φ)^λ`,
 with `d_c` the directional derivative of the criterion at candidate `c`:
 
-- trace, `φ = tr(W M⁻¹)` (W selects and scales the parameters the criterion is about):
-  `d_c = tr(Ã_c M⁻¹ W M⁻¹ Ã_cᵀ)/σ²`, λ = 1/2;
+- trace and task, `φ = tr(W M⁻¹)` (trace: W diagonal, selects and scales the
+  parameters the criterion is about; task: the task's information, a full matrix, both
+  linear criteria): `d_c = tr(Ã_c M⁻¹ W M⁻¹ Ã_cᵀ)/σ²`, λ = 1/2;
 - det, `φ = log det M⁻¹`: `d_c = tr(Ã_c M⁻¹ Ã_cᵀ)/σ²`, compared with `p`, λ = 1.
 
 The general equivalence theorem says `w` is optimal iff `max_c d_c = φ` (trace) or `= p`
@@ -153,17 +154,18 @@ def _observe(robot, problem: DesignProblem, q, force, level, n_levels, chunk=512
     return np.concatenate(out)[:n], np.asarray(nominal)
 
 
-def _stats(A, mask, wdiag, sigma2, criterion, w):
+def _stats(A, mask, Wm, sigma2, criterion, w):
     # φ (trace: tr(W M⁻¹); det: log det M⁻¹) and every candidate's d_c at weights w.
-    # A: (n, 3, p) scaled observations; mask: (n,) candidates of the choice.
+    # A: (n, 3, p) scaled observations; mask: (n,) candidates of the choice; Wm: (p, p)
+    # the linear criterion's W in the scaled parameters.
     p = A.shape[-1]
     M = jnp.einsum("n,nrp,nrq->pq", w, A, A) / sigma2
     L = cholesky(M)
     if criterion == "trace":
         Minv = cho_solve(L, jnp.eye(p, dtype=A.dtype))
-        phi = jnp.sum(wdiag * jnp.diagonal(Minv))
-        B = jnp.einsum("nrp,pq->nrq", A, Minv * jnp.sqrt(wdiag)[None, :])  # Ã M⁻¹ W^½
-        d = jnp.sum(B * B, axis=(1, 2)) / sigma2
+        phi = jnp.sum(Wm * Minv)
+        B = jnp.einsum("nrp,pq->nrq", A, Minv)  # Ã M⁻¹
+        d = jnp.einsum("nrp,pq,nrq->n", B, Wm, B) / sigma2
     else:
         phi = -2.0 * jnp.sum(jnp.log(jnp.diagonal(L)))
         X = jax.vmap(lambda a: cho_solve(L, a.T))(A)  # (n, p, 3)
@@ -173,7 +175,7 @@ def _stats(A, mask, wdiag, sigma2, criterion, w):
 
 @exported
 @eqx.filter_jit
-def _rounds(A, masks, w, wdiag, sigma2, criterion: str, steps: int):
+def _rounds(A, masks, w, Wm, sigma2, criterion: str, steps: int):
     # `steps` multiplicative updates of every choice (leading axis), then φ and max d.
     p = A.shape[-1]
     ref = None if criterion == "trace" else float(p)
@@ -189,7 +191,7 @@ def _rounds(A, masks, w, wdiag, sigma2, criterion: str, steps: int):
         phi, d = _stats(a, mask, wd, sigma2, criterion, w1)
         return w1, phi, jnp.max(d)
 
-    return jax.vmap(one)(A, masks, w, wdiag)
+    return jax.vmap(one)(A, masks, w, Wm)
 
 
 def _lower_bound(phi, dmax, criterion, p):
@@ -203,7 +205,7 @@ def _lower_bound(phi, dmax, criterion, p):
 def has_bound(problem: DesignProblem) -> bool:
     """Whether `design_bound` covers the problem: every criterion, except that a
     determinant (det, or weighted's det part) of a parameter subset (focus) has none."""
-    return problem.focus is None or problem.criterion == "trace"
+    return problem.focus is None or problem.criterion in ("trace", "task")
 
 
 def design_bound(
@@ -311,7 +313,17 @@ def design_bound(
     if sel is not None:
         sel_mask = np.zeros(p)
         sel_mask[list(sel)] = 1.0
-    wdiag = sel_mask[None, :] * (np.ones_like(nom) if problem.is_relative else nom**2)
+    # The task criterion is linear in the covariance, as the trace: the same algorithm
+    # and bound with a full W.
+    kind = "det" if problem.criterion == "det" else "trace"
+    if problem.criterion == "task":
+        # trace(C W) with C = D C_s D in the scaled parameters (D = diag(nominal)).
+        assert problem.task is not None
+        W = np.asarray(problem.task)
+        Wm = nom[:, :, None] * W[None] * nom[:, None, :]
+    else:
+        wdiag = sel_mask[None, :] * (np.ones_like(nom) if problem.is_relative else nom**2)
+        Wm = wdiag[:, :, None] * np.eye(p)[None]
     sigma2 = robot.experiment.noise_std**2 / problem.repeats
     w = masks / masks.sum(1, keepdims=True)
     phi = np.full(len(choices), np.inf)
@@ -323,22 +335,22 @@ def design_bound(
             jnp.asarray(As[active]),
             jnp.asarray(masks[active]),
             jnp.asarray(w[active]),
-            jnp.asarray(wdiag[active]),
+            jnp.asarray(Wm[active]),
             sigma2,
-            problem.criterion,
+            kind,
             _ROUND,
         )
         w[active], phi[active], dmax[active] = np.asarray(wa), np.asarray(pa), np.asarray(da)
         ok = np.isfinite(phi) & np.isfinite(dmax)
-        bound = np.where(ok, _lower_bound(phi, dmax, problem.criterion, p), -np.inf)
+        bound = np.where(ok, _lower_bound(phi, dmax, kind, p), -np.inf)
         best = np.min(np.where(ok, phi, np.inf))
         # Choices whose bound is above the best achievable value cannot hold the least.
-        margin = tol * (abs(best) if problem.criterion == "trace" else 1.0)
+        margin = tol * (abs(best) if kind == "trace" else 1.0)
         active = np.flatnonzero(bound < best - margin)
         if active.size == 0:
             break
     i = int(np.argmin(np.where(np.isfinite(bound), bound, np.inf)))
-    if problem.criterion == "trace":
+    if kind == "trace":
         value = float(bound[i]) / problem.m
     else:
         # det of the covariance of m configurations: exp(log det M*⁻¹ − p log m), in
@@ -347,7 +359,7 @@ def design_bound(
         if not problem.is_relative:
             logdet += 2.0 * float(np.sum(np.log(np.abs(nom[i]))))
         value = math.exp(logdet)
-    ref = phi[i] if problem.criterion == "trace" else p
+    ref = phi[i] if kind == "trace" else p
     weights = np.zeros(len(q))
     np.add.at(weights, idx[i][masks[i]], w[i][masks[i]])
     return DesignBound(

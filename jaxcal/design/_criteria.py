@@ -71,7 +71,7 @@ __all__ = [
     "observe_jit",
 ]
 
-CRITERIA: tuple[str, ...] = ("trace", "det", "weighted")
+CRITERIA: tuple[str, ...] = ("trace", "det", "weighted", "task")
 
 
 class DesignCriteria(eqx.Module):
@@ -82,6 +82,8 @@ class DesignCriteria(eqx.Module):
     - `relative_std`: `std / |nominal|` (dimensionless).
     - `trace`, `det`, `logdet`, `weighted`: O1, O2 (and its log), O3 — of the relative
       covariance if `relative`, else of the covariance in user units.
+    - `task`: with a task's information `W` (`task_weight`), the task criterion
+      `trace(C W)` (m², `design/_task.py`), else `None`.
     - `full_rank`: the information matrix is positive definite; if not, every criterion
       is `+inf` and `unidentifiable` lists the parameters of the null space.
     """
@@ -106,9 +108,12 @@ class DesignCriteria(eqx.Module):
         return result_of((self.full_rank, RESULTS.rank_deficient))
 
     def value(self, criterion: str) -> Float[Array, ""]:
-        """The criterion `"trace"`, `"det"` or `"weighted"`."""
+        """The criterion `"trace"`, `"det"`, `"weighted"` or `"task"` (the last only for
+        criteria computed with a task's information)."""
         if criterion not in CRITERIA:
             raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
+        if criterion == "task" and self.task is None:
+            raise ValueError("the task criterion needs the task's information (task_weight=)")
         return getattr(self, criterion)
 
     def unidentifiable(self) -> tuple[str, ...]:
@@ -120,6 +125,7 @@ class DesignCriteria(eqx.Module):
 
     _null_names: tuple[str, ...] = eqx.field(static=True, default=())
     select: tuple[int, ...] | None = eqx.field(static=True, default=None)
+    task: Float[Array, ""] | None = None
 
 
 def _scaled_information(obs, nominal, sigma):
@@ -162,12 +168,15 @@ def criteria_from_observation(
     relative: bool = True,
     weights: tuple[float, float] = (0.5, 0.5),
     select: tuple[int, ...] | None = None,
+    task_weight: Float[Array, "p p"] | None = None,
 ) -> DesignCriteria:
     """Criteria from observation matrices (see `design_observation`), per-row noise
     standard deviations `sigma` (m) and the nominal values. Traceable.
 
     `select`: indices of the parameters the criteria are about (the marginal covariance
-    of those, all parameters still being estimated); default all."""
+    of those, all parameters still being estimated); default all. `task_weight`: a
+    task's information `W` (`task_information`, per unit of the parameters as given),
+    for the task criterion `trace(C W)` (m²)."""
     M = _scaled_information(obs, nominal, sigma)
     L, ok = _factor(M)
     X = _inverse_factor(L)
@@ -196,6 +205,9 @@ def criteria_from_observation(
     det = jnp.exp(logdet)
     weighted = weights[0] * trace + weights[1] * det
     std = jnp.where(ok, jnp.sqrt(jnp.diagonal(cov)), inf)
+    task = None
+    if task_weight is not None:
+        task = jnp.where(ok, jnp.sum(cov * task_weight), inf)  # trace(C W), both symmetric
     null: tuple[str, ...] = ()
     okh = _concrete(ok)
     if names and okh is not None and not bool(okh):
@@ -218,6 +230,7 @@ def criteria_from_observation(
         weights=weights,
         _null_names=null,
         select=select,
+        task=task,
     )
 
 
@@ -321,19 +334,27 @@ def host_criteria(
     relative: bool = True,
     weights: tuple[float, float] = (0.5, 0.5),
     select: tuple[int, ...] | None = None,
+    task_weight: Float[Array, "p p"] | None = None,
 ) -> DesignCriteria:
     """Host-side `criteria_from_observation` (same arguments): one compiled program; a
     design that does not determine every parameter is evaluated again outside jit,
     where its null space can be named."""
     w = (float(weights[0]), float(weights[1]))
-    c = _criteria_compiled(
-        obs, nominal, sigma, names=names, relative=relative, weights=w, select=select
-    )
-    if not bool(c.full_rank):
-        c = criteria_from_observation(
-            obs, nominal, sigma, names=names, relative=relative, weights=w, select=select
+
+    def run(f) -> DesignCriteria:
+        return f(
+            obs,
+            nominal,
+            sigma,
+            names=names,
+            relative=relative,
+            weights=w,
+            select=select,
+            task_weight=task_weight,
         )
-    return c
+
+    c = run(_criteria_compiled)
+    return c if bool(c.full_rank) else run(criteria_from_observation)
 
 
 def resolve_parameters(

@@ -65,6 +65,7 @@ from ._constraints import constraint_values, design_bounds, design_loads
 from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
 from ._plans import level_separation, random_designs
 from ._problem import DesignProblem, design_objective, log_value, problem_criteria
+from ._task import task_shares, task_weight
 
 __all__ = [
     "Design",
@@ -229,6 +230,8 @@ class Design:
     - `repeats`: each configuration of `q` is measured this many times (the criteria
       count every repetition; `dataset` lists them all).
     - `bound`: the approximate-design bound (`design_bound`), `efficiency` = bound/value.
+    - `task_weight`: for the task criterion, the task's information `W` (per unit of
+      the parameters of `criteria.names`).
     """
 
     q: np.ndarray
@@ -245,6 +248,7 @@ class Design:
     random_best: float | None = None
     repeats: int = 1
     bound: DesignBound | None = None
+    task_weight: np.ndarray | None = None
 
     @property
     def efficiency(self) -> float | None:
@@ -252,8 +256,12 @@ class Design:
         return None if self.bound is None else self.bound.efficiency(self.value)
 
     def shares(self) -> dict[str, float]:
-        """Each parameter's share of the trace of the covariance (`share_of_trace`)."""
-        return share_of_trace(self.criteria)
+        """Each parameter's share of the criterion: of the trace of the covariance
+        (`share_of_trace`), or for the task criterion of `trace(C W)` (its diagonal term
+        `C_ii W_ii` over the total; the off-diagonal terms make the rest)."""
+        if self.task_weight is None:
+            return share_of_trace(self.criteria)
+        return task_shares(self.criteria.covariance, self.task_weight, self.criteria.names)
 
     def dataset(self, robot: Robot) -> Dataset:
         """The design as a `Dataset` without deflections (write it with
@@ -313,6 +321,7 @@ def optimise_design(
     level_gap_deg: float = 20.0,
     q2_levels: str | tuple[float | None, ...] = "span",
     bound_pool: int = 2000,
+    task: Dataset | None = None,
 ) -> Design:
     """Optimise a design of `m` configurations (see module doc and `DesignProblem`).
 
@@ -347,6 +356,10 @@ def optimise_design(
       one value per group (deg, `None` = optimised). The bound obeys the same levels.
     - `bound_pool`: candidates of the approximate-design bound (`design_bound`, with
       the design's own configurations added); 0 skips it.
+    - `task`: with `criterion="task"`, the work the calibration is for (its rows' poses
+      and process wrenches, `read_path`): the design minimises the mean square error
+      the calibrated model leaves there, `trace(C W)` in m² (`design/_task.py`), over
+      the physical parameters (`parameters` must be `"physical"` or the default).
 
     Returns the best feasible `Design` over the starts (`feasible=False` if none is).
     """
@@ -355,6 +368,17 @@ def optimise_design(
     parameters, listed = resolve_parameters(robot, parameters)
     if listed is not None:
         focus = listed
+    W = None
+    if criterion == "task":
+        if task is None:
+            raise ValueError("criterion='task' needs the task's rows (task=...)")
+        if listed is not None or focus is not None:
+            raise ValueError("criterion='task' weighs the parameters by the task: no focus")
+        # The task says what matters: every physical parameter, weighed by its effect there.
+        parameters = "physical"
+        W = jnp.asarray(task_weight(robot, task, loads != "vertical", model or "full"))
+    elif task is not None:
+        raise ValueError("task= goes with criterion='task'")
     # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
     problem = DesignProblem(
         robot,
@@ -369,6 +393,7 @@ def optimise_design(
         model=model,
         repeats=repeats,
         level_gap_deg=level_gap_deg,
+        task=W,
     )
     problem = dataclasses.replace(problem, q2_levels_deg=resolve_levels(problem, q2_levels))
     g, pins = problem.group_index, problem.q2_levels_deg
@@ -465,6 +490,7 @@ def optimise_design(
         random_best=random_best,
         repeats=repeats,
         bound=bound,
+        task_weight=None if W is None else np.asarray(W),
     )
 
 
@@ -493,7 +519,7 @@ def resolve_levels(
 def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
     # One parameter holding most of the trace: the design spends itself on a parameter
     # it cannot determine (typically Kc in the physical set).
-    if criterion == "det" or not bool(c.full_rank):
+    if criterion in ("det", "task") or not bool(c.full_rank):
         return
     if parameters != "physical" or not c.relative:
         # Absolute shares (compliances only) say which compliance is largest, not which
@@ -524,12 +550,19 @@ def rank_random_designs(
     the default problem, 3 q2 groups at least `level_gap_deg` apart, `q2_levels` as in
     `optimise_design` but all random by default), sorted by their criterion, best
     first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further `DesignProblem`
-    settings (`parameters`, `criterion`, `model`, ...). The reference designs a design
-    is compared with (the best, the median)."""
+    settings (`parameters`, `criterion`, `model`, ...; for `criterion="task"`, `task`
+    is the task's rows as for `optimise_design`). The reference designs a design is
+    compared with (the best, the median)."""
     _check_x64(robot)
     parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
     if listed is not None:
         problem["focus"] = listed
+    if isinstance(problem.get("task"), Dataset):
+        k1 = problem.get("include_k1")
+        k1 = problem.get("loads", "vertical") != "vertical" if k1 is None else k1
+        problem["task"] = jnp.asarray(
+            task_weight(robot, problem["task"], k1, problem.get("model") or "full")
+        )
     P = DesignProblem(
         robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem
     )

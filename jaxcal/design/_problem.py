@@ -43,9 +43,12 @@ class DesignProblem(eqx.Module):
       `groups` gives the q2 group of each configuration (configurations of a group
       share one q2 variable); required structure for aggregated (default `i mod 3`),
       optional for physical.
-    - `criterion`: `"trace"`, `"det"` or `"weighted"`; `relative` and `weights` as in
-      `design_criteria`. `include_k1` defaults to `loads != "vertical"`. `focus`: the
-      criterion is about these parameters only (e.g. `("k2", "k3")`, section 5.2).
+    - `criterion`: `"trace"`, `"det"`, `"weighted"` or `"task"`; `relative` and
+      `weights` as in `design_criteria`. The task criterion `trace(C W)` (m²,
+      `design/_task.py`) needs the `physical` set and `task`, the task's information
+      `W` `(p, p)` over `names()` (`task_weight`). `include_k1` defaults to
+      `loads != "vertical"`. `focus`: the criterion is about these parameters only
+      (e.g. `("k2", "k3")`, section 5.2).
     - `model`: observation model (see `design_observation`): `"full"` (default) or
       `"linear"` (eq. 5, compensator folded into joint 2).
     - `repeats`: every configuration is measured this many times (the noise variance of
@@ -76,6 +79,7 @@ class DesignProblem(eqx.Module):
     q2_levels_deg: tuple[float | None, ...] | None = eqx.field(
         static=True, default=None, converter=lambda v: _plain_levels(v)
     )
+    task: Float[Array, "p p"] | None = None
 
     def __check_init__(self):
         if self.m < 1:
@@ -102,6 +106,20 @@ class DesignProblem(eqx.Module):
             raise ValueError(f"groups must have {self.m} entries, got {len(self.groups)}")
         if self.q2_levels_deg is not None:
             self._check_levels(self.q2_levels_deg)
+        if (self.criterion == "task") != (self.task is not None):
+            raise ValueError("task: the task's information goes with criterion='task', and only")
+        if self.task is not None:
+            if self.parameters != "physical" or self.focus is not None:
+                raise ValueError(
+                    "criterion='task' weighs every physical parameter by what the task needs: "
+                    "parameters='physical', no focus"
+                )
+            p = len(self.names())
+            if self.task.shape != (p, p):
+                raise ValueError(
+                    f"task must be ({p}, {p}) over the parameters {self.names()}, got "
+                    f"{self.task.shape}"
+                )
 
     def _check_levels(self, levels: tuple[float | None, ...]) -> None:
         if self.group_index is None or len(levels) != self.n_groups:
@@ -180,12 +198,13 @@ def problem_criteria(problem: DesignProblem, q) -> DesignCriteria:
         relative=problem.is_relative,
         weights=problem.weights,
         select=select_parameters(problem.names(), problem.focus),
+        task_weight=problem.task,
     )
 
 
 def log_value(problem: DesignProblem, c: DesignCriteria):
-    if problem.criterion == "trace":
-        return jnp.log(c.trace)
+    if problem.criterion in ("trace", "task"):
+        return jnp.log(c.value(problem.criterion))
     if problem.criterion == "det":
         return c.logdet
     w1, w2 = problem.weights
@@ -193,6 +212,7 @@ def log_value(problem: DesignProblem, c: DesignCriteria):
 
 
 def design_objective(problem: DesignProblem, q: Float[Array, "m 6"]) -> Float[Array, ""]:
-    """The criterion of `problem` for configurations `q` (rad): O1, O2 or O3 (not logged).
+    """The criterion of `problem` for configurations `q` (rad): O1, O2, O3 or the task's
+    (not logged).
     Pure JAX; differentiable with respect to `q`."""
     return problem_criteria(problem, q).value(problem.criterion)

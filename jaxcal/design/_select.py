@@ -38,7 +38,7 @@ import numpy as np
 from .._io import Dataset
 from .._robot import Robot
 from ._criteria import design_parameter_names, k1_identifiable
-from ._task import observe_physical, task_information
+from ._task import observe_physical, task_weight
 
 __all__ = [
     "SELECT_CRITERIA",
@@ -361,9 +361,7 @@ def select_from_pool(
         obs = obs * nominal  # relative errors
     elif criterion == "task":
         assert task is not None
-        t_moment = task.moment if task.has_moments else None
-        t_obs, _ = observe_physical(robot, task.q, task.force, t_moment, k1, model)
-        W = np.asarray(task_information(t_obs))
+        W = task_weight(robot, task, k1, model)
     sel = select_rows(obs, sigma, k, criterion=criterion, weight=W)
     bound = pool_bound(obs, sigma, k, criterion=criterion, weight=W)
     rng = np.random.default_rng(seed)

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._io import Dataset
 from .._robot import Robot
 from ._criteria import (
     criteria_from_observation,
@@ -42,6 +43,8 @@ __all__ = [
     "task_value",
     "task_prediction",
     "observe_physical",
+    "task_weight",
+    "task_shares",
 ]
 
 
@@ -60,9 +63,9 @@ def task_value(
     """The task criterion `trace(C W)` (m²) of a design with observation matrices `obs`
     and per-row noise `sigma` (m), `C` its parameter covariance. Traceable and
     differentiable; `+inf` when the design does not determine every parameter."""
-    c = criteria_from_observation(obs, nominal, sigma, relative=False)
-    value = jnp.sum(c.covariance * W)  # trace(C W), both symmetric
-    return jnp.where(c.full_rank, value, jnp.inf)
+    task = criteria_from_observation(obs, nominal, sigma, relative=False, task_weight=W).task
+    assert task is not None  # computed, given W
+    return task
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +96,25 @@ class TaskPrediction:
             "undetermined": list(self.undetermined),
             "share": self.share,
         }
+
+
+def task_weight(robot: Robot, task: Dataset, include_k1: bool, model: str = "full") -> np.ndarray:
+    """Host-side: the task's information `W` `(p, p)` over the physical parameters of a
+    design (`design_parameter_names(robot, "physical", include_k1=...)`), from the task's
+    rows (poses and process wrenches, `read_path`'s or the data format). Raises
+    `ValueError` when the task depends on `k1` and the design leaves it out (vertical
+    loads cannot determine it: such a design cannot serve that task)."""
+    moment = task.moment if task.has_moments else None
+    t_obs = np.asarray(observe_physical(robot, task.q, task.force, moment, True, model)[0])
+    if not include_k1:
+        need = np.sqrt(np.mean(np.sum(t_obs**2, axis=1), axis=0))  # RMS per column
+        if need[0] > 1e-12 * need.max():
+            raise ValueError(
+                "task: its wrenches turn joint 1 (k1), which a design with vertical loads "
+                "cannot determine; use loads='mixed' (--loads mixed)"
+            )
+        t_obs = t_obs[:, :, 1:]
+    return np.asarray(task_information(jnp.asarray(t_obs)))
 
 
 def observe_physical(robot, q, force, moment, include_k1: bool, model: str):
@@ -148,5 +170,15 @@ def task_prediction(
         return TaskPrediction(float("inf"), np.full(J.shape[0], np.inf), names, undetermined, {})
     total = float(np.sum(C * W))
     rows = np.sqrt(np.einsum("nrp,pq,nrq->n", J, C, J))
-    share = {n: float(C[i, i] * W[i, i] / total) for i, n in enumerate(names)}
+    share = task_shares(C, W, names)
     return TaskPrediction(float(np.sqrt(total) * 1e3), rows * 1e3, names, (), share)
+
+
+def task_shares(
+    C: np.ndarray | Array, W: np.ndarray | Array, names: tuple[str, ...]
+) -> dict[str, float]:
+    """Host-side: each parameter's share of `trace(C W)`: its diagonal term `C_ii W_ii`
+    over the total (the off-diagonal terms make the rest)."""
+    C, W = np.asarray(C), np.asarray(W)
+    total = float(np.sum(C * W))
+    return {n: float(C[i, i] * W[i, i] / total) for i, n in enumerate(names)}
