@@ -40,6 +40,10 @@ def test_exchange_finds_the_best_subset_and_the_bound_is_below_it(criterion):
         best = min(values.values())
         assert sel.value == pytest.approx(_criterion(obs, sigma, sel.rows, criterion, W), rel=1e-9)
         hits += sel.value <= best + 1e-9 * abs(best)
+        assert sel.start in ("greedy", "rounded")  # the better of the two starts' results
+        again = select_rows(obs, sigma, k, criterion=criterion, weight=W, start=sel.rows)
+        assert again.start == "given" and again.exchanges == 0
+        np.testing.assert_array_equal(again.rows, sel.rows)
         assert pool_bound(obs, sigma, k, criterion=criterion, weight=W) <= best + 1e-9 * abs(best)
     # An exchange method is a local search: it may miss the optimum of a hard pool, but
     # not on most of these small ones (measured: 15 of 15).

@@ -13,6 +13,11 @@ from .._format import format_table
 from .main import output_failed, print_json, priors_of
 
 _NAMES = {"det": "log det of the covariance", "trace": "trace of the relative covariance"}
+_STARTS = {
+    "greedy": "greedy start",
+    "rounded": "rounded approximate design",
+    "given": "given start",
+}
 
 
 def run_select(args: argparse.Namespace) -> int:
@@ -145,7 +150,7 @@ def _report(args, out, d) -> None:
             if eff is not None
             else "no bound with priors (it holds for the data's information alone); "
         )
-        + f"{d['exchanges']} exchanges after the greedy start"
+        + f"{d['exchanges']} exchanges after the {_STARTS[d['start']]}"
         + ("" if d["full_rank"] else "; the chosen rows do NOT determine every parameter")
     )
     if d.get("priors"):
