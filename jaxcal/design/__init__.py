@@ -46,10 +46,12 @@ from ._plans import (
 )
 from ._select import (
     SELECT_CRITERIA as SELECT_CRITERIA,
-    PoolSelection as PoolSelection,
     Selection as Selection,
-    select_from_pool as select_from_pool,
     select_rows as select_rows,
+)
+from ._select_pool import (
+    PoolSelection as PoolSelection,
+    select_from_pool as select_from_pool,
 )
 from ._select_tree import select_tree_rows as select_tree_rows
 from ._task import (

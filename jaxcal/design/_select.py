@@ -30,8 +30,9 @@ rows determine (a tree robot's calibration with priors, `select_tree_rows`).
 
 **Quality.** `pool_bound` is the approximate-design bound of the pool (as
 `design/_bound.py` for generated candidates: the multiplicative algorithm, rigorous at
-any iterate), so a selection is stated as its efficiency: `bound / value` for trace and
-task, `exp((bound − value)/p)` for det (D-efficiency).
+any iterate), so a selection is stated as its efficiency (`selection_efficiency`,
+`_select_pool.py`): `bound / value` for trace and task, `exp((bound − value)/p)` for
+det (D-efficiency).
 """
 
 from __future__ import annotations
@@ -40,20 +41,12 @@ import dataclasses
 
 import numpy as np
 
-from .._io import Dataset
-from .._robot import Robot
-from ._criteria import design_parameter_names, k1_identifiable
-from ._task import observe_physical, task_weight
-
 __all__ = [
     "SELECT_CRITERIA",
     "Selection",
     "select_rows",
     "pool_bound",
     "subset_values",
-    "PoolSelection",
-    "select_from_pool",
-    "selection_efficiency",
 ]
 
 SELECT_CRITERIA: tuple[str, ...] = ("det", "trace", "task")
@@ -345,89 +338,3 @@ def pool_bound(
     if criterion == "det":
         return phi + p * np.log(p / dmax) - p * np.log(k) - 2.0 * float(np.sum(np.log(scale)))
     return phi**2 / dmax / k
-
-
-@dataclasses.dataclass(frozen=True)
-class PoolSelection:
-    """`select_from_pool`'s answer: the `selection`, the parameters it is about
-    (`names`), the pool's `bound` and the selection's `efficiency` against it (1 is the
-    best any k rows of the pool could do), and the criterion of `random` k-row subsets
-    of the pool (`random_subsets` of them, seeded) for comparison."""
-
-    selection: Selection
-    names: tuple[str, ...]
-    bound: float
-    efficiency: float
-    random: np.ndarray
-
-    def to_dict(self) -> dict:
-        s = self.selection
-        finite = self.random[np.isfinite(self.random)]
-        return {
-            "rows": [int(i) + 1 for i in s.rows],
-            "criterion": s.criterion,
-            "value": s.value,
-            "bound": self.bound,
-            "efficiency": self.efficiency,
-            "exchanges": s.exchanges,
-            "start": s.start,
-            "full_rank": s.full_rank,
-            "parameters": list(self.names),
-            "random_median": float(np.median(self.random)) if self.random.size else None,
-            "random_full_rank": int(finite.size),
-            "random_subsets": int(self.random.size),
-        }
-
-
-def selection_efficiency(criterion: str, value: float, bound: float, p: int) -> float:
-    """A selection's efficiency against the pool's bound (`pool_bound`): `bound/value`
-    for trace and task, the D-efficiency `exp((bound − value)/p)` for det; 0 for a
-    selection that does not determine every parameter."""
-    if not np.isfinite(value):
-        return 0.0
-    if criterion == "det":
-        return float(np.exp((bound - value) / p))
-    return float(bound / value)
-
-
-def select_from_pool(
-    robot: Robot,
-    pool: Dataset,
-    k: int,
-    *,
-    criterion: str = "det",
-    task: Dataset | None = None,
-    model: str = "full",
-    random_subsets: int = 200,
-    seed: int = 0,
-) -> PoolSelection:
-    """Host-side: the `k` rows of a FANUC-form data file `pool` (its poses and loads;
-    deflections, if any, ignored) to measure for the physical parameters (k1 when some
-    load excites it), by `criterion`: `"det"`, `"trace"` (of the relative errors, as
-    `design_criteria` for the physical set) or `"task"` (`task`: the poses and process
-    wrenches the calibration is for). With its efficiency against the pool's bound and
-    the criterion of `random_subsets` random k-row subsets."""
-    if criterion == "task" and task is None:
-        raise ValueError("the task criterion needs the task's rows (task=...)")
-    moment = pool.moment if pool.has_moments else None
-    k1 = k1_identifiable(pool.force, moment)
-    names = design_parameter_names(robot, "physical", include_k1=k1)
-    obs, nominal = (
-        np.asarray(a) for a in observe_physical(robot, pool.q, pool.force, moment, k1, model)
-    )
-    sigma = np.asarray(pool.sigma)
-    W = None
-    if criterion == "trace":
-        obs = obs * nominal  # relative errors
-    elif criterion == "task":
-        assert task is not None
-        W = task_weight(robot, task, k1, model)
-    sel = select_rows(obs, sigma, k, criterion=criterion, weight=W)
-    bound = pool_bound(obs, sigma, k, criterion=criterion, weight=W)
-    rng = np.random.default_rng(seed)
-    subsets = [rng.choice(len(pool), k, replace=False) for _ in range(random_subsets)]
-    rand = subset_values(obs, sigma, subsets, criterion=criterion, weight=W)
-    p = obs.shape[-1]
-    return PoolSelection(
-        sel, names, bound, selection_efficiency(criterion, sel.value, bound, p), rand
-    )

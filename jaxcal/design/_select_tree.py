@@ -29,14 +29,8 @@ from .._identification.parameter_groups import (
 )
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from ._select import (
-    SELECT_CRITERIA,
-    PoolSelection,
-    pool_bound,
-    select_rows,
-    selection_efficiency,
-    subset_values,
-)
+from ._select import SELECT_CRITERIA, pool_bound, select_rows, subset_values
+from ._select_pool import PoolSelection, selection_efficiency
 
 __all__ = ["select_tree_rows"]
 
