@@ -60,6 +60,16 @@ def _update(C, a, copies):
     return 0.5 * (C + C.T)
 
 
+def _fitted_covariance(cal: TreeCalibration, cols: list[int], scale: np.ndarray):
+    # The data's covariance of `cols` in units of their typical sizes, as the fit left
+    # it (its Jacobian at the estimate, which is where the advice starts): only when
+    # every column was fitted and without priors (the advice is about the data alone).
+    if cal.prior_std is not None or not all(cal.fitted[i] for i in cols):
+        return None
+    C = np.asarray(cal.fit.covariance)[np.ix_(cols, cols)] / np.outer(scale, scale)
+    return C if np.all(np.isfinite(C)) else None
+
+
 def advise_tree(
     cal: TreeCalibration,
     data: MarkerData,
@@ -104,11 +114,13 @@ def advise_tree(
     qc = np.random.default_rng(seed).uniform(lo, hi, (pool, len(lo)))
     k = len(robot.marker_names)
     plan = MarkerData(q=qc, markers=None, seen=np.ones((pool, k), bool), sigma=np.full(pool, sig))
-    A0 = scaled_jacobian(robot, cal.table, data)[..., cols].reshape(-1, len(cols))
     Ac = scaled_jacobian(robot, cal.table, plan)[..., cols].reshape(pool, 3 * k, len(cols))
-    C, ok = covariance_from_jacobian(jnp.asarray(A0))
-    if not bool(ok):
-        raise ValueError("the rows measured do not determine the fitted parameters together")
+    C = _fitted_covariance(cal, cols, scale)
+    if C is None:
+        A0 = scaled_jacobian(robot, cal.table, data)[..., cols].reshape(-1, len(cols))
+        C, ok = covariance_from_jacobian(jnp.asarray(A0))
+        if not bool(ok):
+            raise ValueError("the rows measured do not determine the fitted parameters together")
 
     def rel(C):
         v = np.diagonal(np.asarray(C))[np.asarray(target)]
