@@ -47,6 +47,7 @@ COMMANDS = (
     "validate",
     "montecarlo",
     "design",
+    "evaluate",
     "discover",
     "compensate",
     "export",
