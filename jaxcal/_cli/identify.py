@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.max_relative_std > 0:
         raise ValueError(f"--max-relative-std must be positive, got {args.max_relative_std}")
     if is_tree_file(args.robot):
-        from .validate import identify_tree
+        from .tree import identify_tree
 
         return identify_tree(args)
     if args.prior:

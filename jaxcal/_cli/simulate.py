@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         size=2 * input_size(args.data),  # the input's rows, simulated columns added
     )
     if is_tree_file(args.robot):
-        from .validate import simulate_tree
+        from .tree import simulate_tree
 
         return simulate_tree(args)
     if args.noise_mm is not None and args.noise_mm < 0:
