@@ -15,7 +15,7 @@ from ._robot import URAD, Robot
 
 __all__ = ["parameter_names", "get_parameters", "set_parameters", "parameter_units"]
 
-_UNITS = {"urad_per_Nm": "µrad/(N·m)", "N_per_m": "N/m", "m": "m"}
+_UNITS = {"urad_per_Nm": "µrad/(N·m)", "N_per_m": "N/m", "m": "m", "urad": "µrad", "N": "N"}
 
 
 def parameter_names(robot: Robot) -> tuple[str, ...]:

@@ -248,8 +248,14 @@ def test_cli_discover_example_answers_none(data_dir, capsys, study):
         "heldout_rms_before_mm",
         "heldout_rms_after_mm",
         "candidates",
+        "size_of",
+        "size",
+        "change_rms_mm",
+        "change_max_mm",
         "warnings",
     }
+    # No effect named: the best candidate's size is stated, with its unit and interval.
+    assert out["size"] and all(d["low95"] <= d["value"] <= d["high95"] for d in out["size"])
     assert out["warnings"] == []  # the example's data fit the nominal model
     assert out["delta_bic"] < 10
     assert all(
@@ -302,6 +308,41 @@ def test_named_effect_size_is_recovered(study, case):
         assert len(fitted) == len(truth)
         z = [(v - t) / sd for (v, sd), t in zip(fitted, truth, strict=True)]
         assert np.all(np.abs(z) < 4), (case, fitted, truth)
+
+
+@pytest.mark.parametrize("case", EFFECTS)
+def test_named_effect_is_sized_in_its_units_and_at_the_poses(study, case):
+    # The size in its units with a 95 % interval, and what the effect changes at the
+    # data's poses: Δ, the difference of the two fits' predictions, is r_before − r_after,
+    # so ‖r_before‖ − ‖r_after‖ ≤ ‖Δ‖ ≤ ‖r_before‖ + ‖r_after‖ (triangle inequality,
+    # exact); the largest row's change is at least the RMS.
+    for r in study[case]["reports"]:
+        assert r.best == case and list(r.best_params) == list(r.params)
+        for d in r.sizes():
+            assert d["low95"] == pytest.approx(d["value"] - 1.96 * d["std"])
+            assert d["high95"] == pytest.approx(d["value"] + 1.96 * d["std"])
+            assert d["unit"] or d["name"].endswith("hardening")
+        rb, ra = np.asarray(r.residuals_before), np.asarray(r.residuals_after)
+        norm = r.change_rms_mm * 1e-3 * np.sqrt(len(rb))  # ‖Δ‖, m
+        nb, na = np.linalg.norm(rb), np.linalg.norm(ra)
+        assert nb - na <= norm * (1 + 1e-9) and norm <= (nb + na) * (1 + 1e-9)
+        assert na < nb  # the effect closes part of the gap
+        assert r.change_max_mm >= r.change_rms_mm
+        line = r.size_line()
+        assert line.startswith("Size: ") and "(95 %: " in line and line in r.summary()
+        j = r.to_json()
+        assert j["size_of"] == r.best and len(j["size"]) == len(r.params)
+
+
+def test_no_effect_states_the_size_it_would_have_had(study):
+    # Without an effect the best candidate's fit projects noise alone: ‖Δ‖²/σ² ~ χ²(p),
+    # p ≤ 3 its parameters, so ‖Δ‖² < n σ² (n = 48 rows; P(χ²(3) > 48) ≈ 2e-10), i.e.
+    # the change's 3-D RMS below σ.
+    for r in study["none"]["reports"]:
+        assert r.effect == "none" and r.best_params and not r.params
+        assert r.change_rms_mm < r.sigma_mm
+        assert r.size_line().startswith("Best candidate, were it there: ")
+        assert r.size_line() in r.summary()
 
 
 # -- held-out residuals and the preload scan on the full model ---------------------------

@@ -285,6 +285,7 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
         return {names[k]: (float(p[k]), float(sd[k])) for k in ks}
 
     nominal = named(sm.names, nom.params[s], nom.cov[s], slice(0, p0))
+    change = np.asarray(nom.residuals[s]) - np.asarray(res_best)  # model with − without
     rep = DiscoveryReport(
         effect=best.candidate.name if chosen else "none",
         joint=best.candidate.joint if chosen else None,
@@ -328,6 +329,12 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
         nominal_converged=bool(nom.converged[s]),
         sigma_mm=float(np.mean(sigma) * 1e3),
         sigma_rows_mm=np.asarray(sigma, float) * 1e3,
+        best_params={
+            f"{best.candidate.label}.{n}": (float(v), float(sd))
+            for n, v, sd in zip(best.candidate.param_names, best.params, best.stds, strict=True)
+        },
+        change_rms_mm=float(np.sqrt(np.mean(np.sum(change**2, axis=1))) * 1e3),
+        change_max_mm=float(np.max(np.linalg.norm(change, axis=1)) * 1e3),
     )
     return rep
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._io import Dataset
 from .._model.candidates import Candidate
+from .._parameters import parameter_units
 from ._supermodel import SuperModel
 
 __all__ = [
@@ -110,6 +111,48 @@ class DiscoveryReport:
     sigma_mm: float = 0.02
     #: Each row's σ (mm), for the worst rows of `warnings` (default: `sigma_mm`).
     sigma_rows_mm: np.ndarray | None = None
+    #: The best candidate's fitted parameters (label-prefixed names with units: value,
+    #: std), whether it was named or not: the size an effect below the noise would have.
+    best_params: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: What the best candidate changes in the fitted model at the data's rows: RMS and
+    #: largest 3-D difference (mm) between the predictions of the fits with and without it
+    #: (the nominal parameters refitted in both).
+    change_rms_mm: float = float("nan")
+    change_max_mm: float = float("nan")
+
+    def sizes(self) -> list[dict]:
+        """The best candidate's size, per parameter: `value`, `std`, the 95 % interval
+        `low95`/`high95` (± 1.96 std) and the `unit`."""
+        return [
+            {
+                "name": n,
+                "value": v,
+                "std": sd,
+                "low95": v - 1.96 * sd,
+                "high95": v + 1.96 * sd,
+                "unit": parameter_units(n),
+            }
+            for n, (v, sd) in self.best_params.items()
+        ]
+
+    def size_line(self) -> str:
+        """The best candidate's size and what it changes at the data's poses, in words."""
+
+        def one(d: dict) -> str:
+            unit = f" {d['unit']}" if d["unit"] else ""
+            return (
+                f"{d['name']} = {d['value']:.4g} ± {d['std']:.2g}{unit} (95 %: "
+                f"{d['low95']:.4g} … {d['high95']:.4g})"
+            )
+
+        said = "; ".join(one(d) for d in self.sizes())
+        change = (
+            f"{self.change_rms_mm:.4f} mm RMS, {self.change_max_mm:.4f} mm at most (3-D) at "
+            "the data's poses"
+        )
+        if self.effect == "none":
+            return f"Best candidate, were it there: {said}; it would change the model by {change}."
+        return f"Size: {said}; it changes the model by {change}."
 
     def worst_rows(self, k: int = 3) -> list[tuple[int, float]]:
         """`(row, largest |residual|/σ)` of the `k` rows worst fitted after (1-based)."""
@@ -156,6 +199,10 @@ class DiscoveryReport:
                 }
                 for c in self.candidates
             ],
+            "size_of": self.best,
+            "size": self.sizes(),
+            "change_rms_mm": self.change_rms_mm,
+            "change_max_mm": self.change_max_mm,
             "warnings": self.warnings(),
         }
 
@@ -184,6 +231,8 @@ class DiscoveryReport:
                 f"{self.delta_bic:.1f}, held-out RMS {self.heldout_rms_before_mm:.4f} → "
                 f"{self.heldout_rms_after_mm:.4f} mm."
             )
+        if self.best_params:
+            lines.append(self.size_line())
         if not self.nominal_converged:
             lines.append(
                 "Warning: the nominal fit stopped before meeting its tolerances; its χ² may "
