@@ -126,8 +126,12 @@ def _rmse_ratio(a, b):
     # log(RMSE_a / RMSE_b) per parameter and its standard error by the delta method on
     # the per-trial squared errors, paired by trial (same seed, no failed trials: trial i
     # of both studies has the same noise key).
-    ea = (a.estimates - a.true) ** 2
-    eb = (b.estimates - b.true) ** 2
+    return _log_rms_ratio((a.estimates - a.true) ** 2, (b.estimates - b.true) ** 2)
+
+
+def _log_rms_ratio(ea, eb):
+    # log(RMS_a / RMS_b) over the trials (axis 0) of squared errors `ea`, `eb` paired by
+    # trial, and its standard error (delta method).
     n = len(ea)
     ma, mb = ea.mean(0), eb.mean(0)
     cab = ((ea - ma) * (eb - mb)).sum(0) / (n - 1)
@@ -467,9 +471,8 @@ def test_task_design_proven_by_repeated_experiments(robot, default_design, task_
             e.append(float(rms))
         err[label] = np.asarray(e)
     for other, claim in (("default", 0.8), ("random", 0.6)):
-        a, b = err["task"] ** 2, err[other] ** 2
-        ma, mb = a.mean(), b.mean()
-        var = a.var(ddof=1) / ma**2 + b.var(ddof=1) / mb**2 - 2 * np.cov(a, b)[0, 1] / (ma * mb)
-        ratio, se = np.sqrt(ma / mb), 0.5 * np.sqrt(ma / mb) * np.sqrt(var / len(a))
+        lr, se_log = _log_rms_ratio(err["task"] ** 2, err[other] ** 2)
+        ratio = float(np.exp(lr))
+        se = ratio * float(se_log)  # the ratio's own standard error (delta method)
         print(f"task / {other}: {ratio:.3f} ± {se:.3f}")
         assert ratio <= claim + 3 * se, other

@@ -291,6 +291,13 @@ def _check_x64(robot: Robot) -> None:
         )
 
 
+def _task_information(robot, task: Dataset, loads: str, include_k1, model) -> Array:
+    # The task's W over a design problem's parameters: k1 among them as `DesignProblem`
+    # decides (`include_k1`, default: loads that are not all vertical).
+    k1 = loads != "vertical" if include_k1 is None else include_k1
+    return jnp.asarray(task_weight(robot, task, k1, model or "full"))
+
+
 @exported
 @eqx.filter_jit
 def pool_values(problem: DesignProblem, q):
@@ -376,7 +383,7 @@ def optimise_design(
             raise ValueError("criterion='task' weighs the parameters by the task: no focus")
         # The task says what matters: every physical parameter, weighed by its effect there.
         parameters = "physical"
-        W = jnp.asarray(task_weight(robot, task, loads != "vertical", model or "full"))
+        W = _task_information(robot, task, loads, None, model)
     elif task is not None:
         raise ValueError("task= goes with criterion='task'")
     # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
@@ -558,10 +565,12 @@ def rank_random_designs(
     if listed is not None:
         problem["focus"] = listed
     if isinstance(problem.get("task"), Dataset):
-        k1 = problem.get("include_k1")
-        k1 = problem.get("loads", "vertical") != "vertical" if k1 is None else k1
-        problem["task"] = jnp.asarray(
-            task_weight(robot, problem["task"], k1, problem.get("model") or "full")
+        problem["task"] = _task_information(
+            robot,
+            problem["task"],
+            problem.get("loads", "vertical"),
+            problem.get("include_k1"),
+            problem.get("model"),
         )
     P = DesignProblem(
         robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem

@@ -98,6 +98,13 @@ class TaskPrediction:
         }
 
 
+def _needed(t_obs: np.ndarray) -> np.ndarray:
+    # Which parameters the task depends on: RMS sensitivity per column of its
+    # observation matrices above round-off of the largest.
+    need = np.sqrt(np.mean(np.sum(t_obs**2, axis=1), axis=0))
+    return need > 1e-12 * need.max()
+
+
 def task_weight(robot: Robot, task: Dataset, include_k1: bool, model: str = "full") -> np.ndarray:
     """Host-side: the task's information `W` `(p, p)` over the physical parameters of a
     design (`design_parameter_names(robot, "physical", include_k1=...)`), from the task's
@@ -107,8 +114,7 @@ def task_weight(robot: Robot, task: Dataset, include_k1: bool, model: str = "ful
     moment = task.moment if task.has_moments else None
     t_obs = np.asarray(observe_physical(robot, task.q, task.force, moment, True, model)[0])
     if not include_k1:
-        need = np.sqrt(np.mean(np.sum(t_obs**2, axis=1), axis=0))  # RMS per column
-        if need[0] > 1e-12 * need.max():
+        if _needed(t_obs)[0]:
             raise ValueError(
                 "task: its wrenches turn joint 1 (k1), which a design with vertical loads "
                 "cannot determine; use loads='mixed' (--loads mixed)"
@@ -158,10 +164,8 @@ def task_prediction(
     # or cannot determine, and the task needs, makes the prediction unbounded.
     t_obs, _ = observe_physical(robot, *task, True, model)
     t_obs = np.asarray(t_obs)
-    need = np.sqrt(np.mean(np.sum(t_obs**2, axis=1), axis=0))  # RMS sensitivity per column
-    left_out = [
-        n for i, n in enumerate(all_names) if i not in kept and need[i] > 1e-12 * need.max()
-    ]
+    needed = _needed(t_obs)
+    left_out = [n for i, n in enumerate(all_names) if i not in kept and needed[i]]
     undetermined = tuple(left_out) + (() if bool(crit.full_rank) else crit.unidentifiable())
     J = t_obs[:, :, cols]
     W = np.asarray(task_information(jnp.asarray(J)))

@@ -286,18 +286,15 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
 
     nominal = named(sm.names, nom.params[s], nom.cov[s], slice(0, p0))
     change = np.asarray(nom.residuals[s]) - np.asarray(res_best)  # model with − without
+    best_named = {
+        f"{best.candidate.label}.{n}": (float(v), float(sd))
+        for n, v, sd in zip(best.candidate.param_names, best.params, best.stds, strict=True)
+    }
     rep = DiscoveryReport(
         effect=best.candidate.name if chosen else "none",
         joint=best.candidate.joint if chosen else None,
         words=best.candidate.words(best.params, best.stds) if chosen else "no missing effect",
-        params=(
-            {
-                f"{best.candidate.label}.{n}": (float(v), float(sd))
-                for n, v, sd in zip(best.candidate.param_names, best.params, best.stds, strict=True)
-            }
-            if chosen
-            else {}
-        ),
+        params=best_named if chosen else {},
         n_rows=len(data),
         dof_before=nu0,
         dof_after=nu1 if chosen else nu0,
@@ -329,10 +326,7 @@ def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_n
         nominal_converged=bool(nom.converged[s]),
         sigma_mm=float(np.mean(sigma) * 1e3),
         sigma_rows_mm=np.asarray(sigma, float) * 1e3,
-        best_params={
-            f"{best.candidate.label}.{n}": (float(v), float(sd))
-            for n, v, sd in zip(best.candidate.param_names, best.params, best.stds, strict=True)
-        },
+        best_params=best_named,
         change_rms_mm=float(np.sqrt(np.mean(np.sum(change**2, axis=1))) * 1e3),
         change_max_mm=float(np.max(np.linalg.norm(change, axis=1)) * 1e3),
     )
