@@ -225,8 +225,13 @@ from .discrepancy import (
     CandidateResult as CandidateResult,
     DiscoveryReport as DiscoveryReport,
     SuperModel as SuperModel,
+    TreeCandidate as TreeCandidate,
+    TreeDiscovery as TreeDiscovery,
+    TreeEffect as TreeEffect,
     discover as discover,
     discover_batch as discover_batch,
+    discover_tree as discover_tree,
+    tree_candidates as tree_candidates,
 )
 from .montecarlo import (
     MonteCarloResult as MonteCarloResult,

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from .._format import format_table
+from .discover_tree import add_arguments as add_tree_arguments, run_tree
 from .main import add_robot_argument, check_output_path, output_failed, print_json
 
 
@@ -41,12 +42,27 @@ def register(sub) -> None:
     p.add_argument(
         "--plot", metavar="FILE.png", default=None, help="save residual plots before/after"
     )
+    add_tree_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from .._io import read_dataset
+    from .._model.robot_files import is_tree_file
     from .._robot import load_robot
+
+    if is_tree_file(args.robot):
+        return run_tree(args)
+    for flag, value in (
+        ("--params", args.params),
+        ("--candidates", args.candidates),
+        ("--test", args.test),
+    ):
+        if value is not None:
+            raise ValueError(
+                f"{flag}: for robots given as a kinematic tree (absolute marker data); the "
+                "built-in form's candidates are the effects listed in --help"
+            )
     from ..discrepancy._discover import discover
 
     check_output_path(

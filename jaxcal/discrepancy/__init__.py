@@ -10,3 +10,10 @@ from ._discover import (
 from ._supermodel import (
     SuperModel as SuperModel,
 )
+from ._tree import (
+    TreeCandidate as TreeCandidate,
+    TreeDiscovery as TreeDiscovery,
+    TreeEffect as TreeEffect,
+    discover_tree as discover_tree,
+    tree_candidates as tree_candidates,
+)

@@ -1,0 +1,159 @@
+"""`jaxcal discover` for a robot given as a kinematic tree with absolute marker data:
+which parameter families the calibration of the `--params` groups lacks."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .._format import format_table
+from .main import check_output_path, output_failed, print_json
+from .tree import load_tree_data
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options that only a tree robot's `discover` reads."""
+    p.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="robots given as a kinematic tree: the nominal model's parameter groups, "
+        "comma-separated (default: the full calibration); the search looks among the others",
+    )
+    p.add_argument(
+        "--candidates",
+        default=None,
+        metavar="GROUPS",
+        help="robots given as a kinematic tree: the groups to look in (default: those of the "
+        "full calibration, masses and spring laws that --params does not fit)",
+    )
+    p.add_argument(
+        "--test",
+        type=int,
+        default=None,
+        metavar="N",
+        help="robots given as a kinematic tree: hold N rows out (drawn by --seed) and report "
+        "their 3-D marker error before and after",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the --test rows (default 0)")
+
+
+def run_tree(args: argparse.Namespace) -> int:
+    """`jaxcal discover` for a tree robot."""
+    from .._identification.elastogeometric import marker_errors, split_rows
+    from .._identification.parameter_groups import parse_groups
+    from ..discrepancy._tree import discover_tree, tree_candidates
+
+    check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
+    robot, data = load_tree_data(args)
+    nominal = parse_groups(args.params, robot)
+    groups = None if args.candidates is None else parse_groups(args.candidates, robot)
+    cands = tree_candidates(robot, nominal, groups)
+    if not cands:
+        raise ValueError("--candidates: every group named is already in --params")
+    train = test = None
+    if args.test is not None:
+        tr, te = split_rows(len(data), args.test, args.seed)
+        train, test = data.subset(tr), data.subset(te)
+    show = not args.no_progress and sys.stderr.isatty()
+    found = discover_tree(
+        robot,
+        data if train is None else train,
+        nominal,
+        candidates=cands,
+        progress=(lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr))
+        if show
+        else None,
+    )
+    for line in found.warnings():
+        print(f"jaxcal discover: warning: {line}", file=sys.stderr)
+    held = None
+    if test is not None:
+        held = {
+            k: (lambda e: {"mean_mm": e.mean(), "std_mm": e.std(), "max_mm": e.max()})(
+                marker_errors(c.robot, test) * 1e3
+            )
+            for k, c in (("before", found.nominal), ("after", found.final))
+        }
+        held = {k: {m: float(x) for m, x in v.items()} for k, v in held.items()}
+    if args.json:
+        out = found.to_json()
+        if held is not None:
+            out["held_out"] = {"rows": args.test, "seed": args.seed, **held}
+        print_json(out)
+    else:
+        _print(found, held)
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from .._io import save_figure
+
+        try:
+            save_figure(found.plot(), args.plot)
+        except OSError as e:
+            return output_failed("discover", e, "the report is printed, only the plot is missing")
+        print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _print(found, held) -> None:
+    print(found.summary())
+    print()
+    rows = [
+        ["RMS (mm)", found.rms_before_mm, found.rms_after_mm],
+        ["leave-one-row-out RMS (mm)", found.loo_before_mm, found.loo_after_mm],
+    ]
+    if held is not None:
+        for m in ("mean_mm", "std_mm", "max_mm"):
+            rows.append([f"held-out {m[:-3]} (mm)", held["before"][m], held["after"][m]])
+    print(format_table(["", "nominal", "with the named effects"], rows))
+    if found.effects:
+        print()
+        print(
+            format_table(
+                ["effect", "parameter", "value", "std", "95 % low", "95 % high", "unit"],
+                [
+                    [
+                        e.candidate.words,
+                        d["name"],
+                        d["value"],
+                        d["std"],
+                        d["low95"],
+                        d["high95"],
+                        d["unit"],
+                    ]
+                    for e in found.effects
+                    for d in e.sizes()
+                ],
+            )
+        )
+    if found.steps:
+        print()
+        print(
+            format_table(
+                [
+                    "candidate",
+                    "delta BIC",
+                    "LOO before (mm)",
+                    "LOO after (mm)",
+                    "change RMS (mm)",
+                    "chosen",
+                ],
+                [_step_row(s) for s in found.steps],
+            )
+        )
+
+
+def _step_row(s: dict) -> list:
+    if s.get("unphysical"):
+        return [s["label"], "", "", "", "", "no: negative spring or mass"]
+    chosen = "yes" if s["chosen"] else "no: not fitted" if s.get("not_fitted") else "no"
+    return [
+        s["label"],
+        s["delta_bic"],
+        s["loo_before_mm"],
+        s["loo_after_mm"],
+        s["change_rms_mm"],
+        chosen,
+    ]
