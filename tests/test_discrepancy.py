@@ -59,7 +59,7 @@ def example(robot, data_dir):
 def study(robot, example):
     # Every case on STUDY.TEST_SEEDS, fitted in batched calls (two compiles: the preset
     # and the robot without compensator; the compiles are most of the time).
-    return STUDY.run_study(robot, example, seeds=STUDY.TEST_SEEDS)
+    return STUDY.run_study(robot, example, cases=STUDY.CASES + STUDY.PAIRS, seeds=STUDY.TEST_SEEDS)
 
 
 # -- candidate physics (cheap, no equilibrium) ------------------------------------------
@@ -252,8 +252,11 @@ def test_cli_discover_example_answers_none(data_dir, capsys, study):
         "size",
         "change_rms_mm",
         "change_max_mm",
+        "effects",
+        "second",
         "warnings",
     }
+    assert out["effects"] == [] and out["second"] is None  # no first effect, no second look
     # No effect named: the best candidate's size is stated, with its unit and interval.
     assert out["size"] and all(d["low95"] <= d["value"] <= d["high95"] for d in out["size"])
     assert out["warnings"] == []  # the example's data fit the nominal model
@@ -332,6 +335,31 @@ def test_named_effect_is_sized_in_its_units_and_at_the_poses(study, case):
         assert line.startswith("Size: ") and "(95 %: " in line and line in r.summary()
         j = r.to_json()
         assert j["size_of"] == r.best and len(j["size"]) == len(r.params)
+
+
+@pytest.mark.parametrize("case", STUDY.PAIRS)
+def test_two_hidden_effects_are_both_named_and_sized(study, case):
+    # The claim: both named in ≥ 9 of 10 seeds (the 10-seed study is in
+    # benchmarks/README.md); on the seed tested here both must be, for the reason given
+    # in test_hidden_effect_is_named. Each size within 4 standard errors of the truth
+    # (6e-5 per parameter). The single-effect cases above name no second effect (their
+    # `named` would carry it): a false second effect needs ΔBIC ≥ 10 on noise, χ²(1) ≥
+    # 10 + ln 144, probability 1e-4 per candidate.
+    truth = dict(zip(STUDY.parts(case), study[case]["truth"], strict=True))
+    for r, named in zip(study[case]["reports"], study[case]["named"], strict=True):
+        assert named == case, named
+        second = r.second
+        assert second is not None and second["named"]
+        sizes = {r.best: list(r.params.values()), second["label"]: list(second["params"].values())}
+        for label, fitted in sizes.items():
+            (v, sd), t = fitted[0], float(np.atleast_1d(truth[label])[0])
+            assert abs(v - t) < 4 * sd, (label, v, sd, t)
+        assert second["heldout_after_mm"] < second["heldout_before_mm"]
+        assert second["rms_after_mm"] < r.rms_after_mm
+        text = r.summary()
+        assert f"Also missing: {second['words']}" in text and r.size_line(second=True) in text
+        j = r.to_json()
+        assert j["effects"] == r.effects and j["second"]["size"]
 
 
 def test_no_effect_states_the_size_it_would_have_had(study):

@@ -50,6 +50,7 @@ from .._model.candidates import Candidate, default_candidates
 from .._plausibility import check_loaded
 from .._robot import Robot
 from ._heldout import heldout_residuals
+from ._look_again import FirstFit, look_again
 from ._report import (
     DECISIVE_BIC,
     CandidateResult,
@@ -84,12 +85,14 @@ def discover_batch(
     refine: int = 3,
     separate: bool = False,
     max_steps: int = MAX_STEPS,
+    again: bool = True,
     progress=None,
 ) -> list[DiscoveryReport]:
     """`discover` for many deflection sets measured with the same design (rows of
     `data`): every fit of every set runs in the same batched calls (seeds studies).
 
-    `deflections` is `(S, n, 3)` m. Returns one `DiscoveryReport` per set.
+    `deflections` is `(S, n, 3)` m. Returns one `DiscoveryReport` per set. `again`:
+    where an effect is named, look for a second one beside it (`_look_again.py`).
     """
     if jnp.asarray(data.q).dtype != jnp.float64:
         raise ValueError(
@@ -180,10 +183,21 @@ def discover_batch(
     held = heldout_residuals(sm, fits, best_fits, targets_a, sigmas_a, max_steps)
 
     reports = []
+    firsts: dict[int, FirstFit] = {}
     for s in range(S):
         rep = _report(
             sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held
         )
+        if rep.effect != "none":
+            j = refined[(s, cands.index(ranked[s][1].candidate))]
+            firsts[s] = FirstFit(
+                cands.index(ranked[s][1].candidate),
+                fits.params[j],
+                fits.free[j],
+                float(fits.chi2[j]),
+                fits.residuals[j],
+                rep.heldout_rms_after_mm,
+            )
         if separate and rep.ambiguous_with:
             params = {
                 r.label: fits.params[refined[(s, cands.index(r.candidate))]]
@@ -192,6 +206,11 @@ def discover_batch(
             }
             rep.separating = separating_configurations(sm, data, rep, params)
         reports.append(rep)
+    if again and firsts:
+        say(f"looking again: a second effect beside the first in {len(firsts)} data sets")
+        more = look_again(sm, cands, firsts, deflections, sigma, refine=refine, max_steps=max_steps)
+        for s, m in more.items():
+            reports[s].second = m
     return reports
 
 

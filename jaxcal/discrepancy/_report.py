@@ -119,10 +119,23 @@ class DiscoveryReport:
     #: (the nominal parameters refitted in both).
     change_rms_mm: float = float("nan")
     change_max_mm: float = float("nan")
+    #: The second look where an effect was named (`_look_again.py`): `named`, and if so
+    #: the second effect's `label`, `words`, `params`, `delta_bic` against the model with
+    #: the first, held-out RMS and change at the data's poses (mm); `None`: not looked.
+    second: dict | None = None
 
-    def sizes(self) -> list[dict]:
-        """The best candidate's size, per parameter: `value`, `std`, the 95 % interval
-        `low95`/`high95` (± 1.96 std) and the `unit`."""
+    @property
+    def effects(self) -> list[str]:
+        """The named effects' labels in the order found (empty: none)."""
+        if self.effect == "none":
+            return []
+        return [self.best] + (
+            [self.second["label"]] if self.second and self.second["named"] else []
+        )
+
+    def sizes(self, params: dict[str, tuple[float, float]] | None = None) -> list[dict]:
+        """The best candidate's size (or that of `params`), per parameter: `value`, `std`,
+        the 95 % interval `low95`/`high95` (± 1.96 std) and the `unit`."""
         return [
             {
                 "name": n,
@@ -132,11 +145,12 @@ class DiscoveryReport:
                 "high95": v + 1.96 * sd,
                 "unit": parameter_units(n),
             }
-            for n, (v, sd) in self.best_params.items()
+            for n, (v, sd) in (self.best_params if params is None else params).items()
         ]
 
-    def size_line(self) -> str:
-        """The best candidate's size and what it changes at the data's poses, in words."""
+    def size_line(self, second: bool = False) -> str:
+        """The best candidate's (or the second effect's) size and what it changes at the
+        data's poses, in words."""
 
         def one(d: dict) -> str:
             unit = f" {d['unit']}" if d["unit"] else ""
@@ -145,11 +159,14 @@ class DiscoveryReport:
                 f"{d['low95']:.4g} … {d['high95']:.4g})"
             )
 
-        said = "; ".join(one(d) for d in self.sizes())
-        change = (
-            f"{self.change_rms_mm:.4f} mm RMS, {self.change_max_mm:.4f} mm at most (3-D) at "
-            "the data's poses"
+        src = self.second if second and self.second else None
+        said = "; ".join(one(d) for d in self.sizes(src["params"] if src else None))
+        rms, top = (
+            (src["change_rms_mm"], src["change_max_mm"])
+            if src
+            else (self.change_rms_mm, self.change_max_mm)
         )
+        change = f"{rms:.4f} mm RMS, {top:.4f} mm at most (3-D) at the data's poses"
         if self.effect == "none":
             return f"Best candidate, were it there: {said}; it would change the model by {change}."
         return f"Size: {said}; it changes the model by {change}."
@@ -203,6 +220,13 @@ class DiscoveryReport:
             "size": self.sizes(),
             "change_rms_mm": self.change_rms_mm,
             "change_max_mm": self.change_max_mm,
+            "effects": self.effects,
+            "second": None
+            if self.second is None
+            else {
+                **{k: v for k, v in self.second.items() if k != "params"},
+                **({"size": self.sizes(self.second["params"])} if self.second["named"] else {}),
+            },
             "warnings": self.warnings(),
         }
 
@@ -233,6 +257,19 @@ class DiscoveryReport:
             )
         if self.best_params:
             lines.append(self.size_line())
+        if self.second and self.second["named"]:
+            sec = self.second
+            lines.append(
+                f"Also missing: {sec['words']} (ΔBIC = {sec['delta_bic']:.1f} against the model "
+                f"with {self.best}, held-out RMS {sec['heldout_before_mm']:.4f} → "
+                f"{sec['heldout_after_mm']:.4f} mm)."
+            )
+            lines.append(self.size_line(second=True))
+        elif self.second is not None and self.second.get("best"):
+            lines.append(
+                f"Looked again beside it: no second effect (best {self.second['best']}, ΔBIC = "
+                f"{self.second['delta_bic']:.1f} against the model with {self.best})."
+            )
         if not self.nominal_converged:
             lines.append(
                 "Warning: the nominal fit stopped before meeting its tolerances; its χ² may "
