@@ -51,6 +51,21 @@ def _study_module():
     return mod
 
 
+def _final(rep):
+    """χ²_red and dof of the final model (with the second effect where one is named)."""
+    sec = rep.second
+    if sec and sec["named"]:
+        return sec["chi2"] / sec["dof"], sec["dof"]
+    return rep.chi2_red_after, rep.dof_after
+
+
+def _sizes(rep, truth, by_label):
+    """(fitted parameters, true values) of each named effect of a report."""
+    if by_label is None:
+        return [(rep.params, truth)]
+    return [(rep.params, by_label[rep.best]), (rep.second["params"], by_label[rep.second["label"]])]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=10)
@@ -61,26 +76,31 @@ def main() -> None:
     robot = jaxcal.load_robot()
     data = jaxcal.read_dataset(ROOT / "tests" / "data" / "example_calibration.csv", robot)
     t0 = time.perf_counter()
-    res = study.run_study(robot, data, seeds=range(args.seeds), perturbed=args.perturbed)
+    res = study.run_study(
+        robot,
+        data,
+        cases=study.CASES + study.PAIRS,
+        seeds=range(args.seeds),
+        perturbed=args.perturbed,
+    )
     seconds = time.perf_counter() - t0
     chi2_before = {
         c: np.array([r.chi2_red_before * r.dof_before for r in res[c]["reports"]]) for c in res
     }
     rows = {}
-    for case in study.CASES:
+    for case in study.CASES + study.PAIRS:
         r = res[case]
         named = sum(n == case for n in r["named"])
         row = {"named": named, "seeds": args.seeds}
         if case != "none":
             ok = [rep for rep, n in zip(r["reports"], r["named"], strict=True) if n == case]
-            row["chi2_band"] = sum(
-                abs(rep.chi2_red_after - 1) <= 3 * math.sqrt(2 / rep.dof_after) for rep in ok
-            )
-            truth = np.atleast_1d(r["truth"])
+            row["chi2_band"] = sum(abs(x - 1) <= 3 * math.sqrt(2 / nu) for x, nu in map(_final, ok))
+            truth = dict(zip(study.parts(case), r["truth"], strict=True)) if "+" in case else None
             z = [
                 abs(v - t) / sd
                 for rep in ok
-                for (v, sd), t in zip(rep.params.values(), truth, strict=True)
+                for params, true in _sizes(rep, r["truth"], truth)
+                for (v, sd), t in zip(params.values(), np.atleast_1d(true), strict=True)
             ]
             row["max_abs_z"] = float(max(z)) if z else None
             row["detected"] = int(np.sum(chi2_before[case] > chi2_before["none"]))

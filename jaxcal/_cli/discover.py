@@ -42,6 +42,30 @@ def register(sub) -> None:
     p.add_argument(
         "--plot", metavar="FILE.png", default=None, help="save residual plots before/after"
     )
+    p.add_argument(
+        "--discriminate",
+        type=int,
+        default=6,
+        metavar="K",
+        help="where the best candidate cannot be told from its runner-up, choose K rows "
+        "(configurations and loads) that would: T-optimal, the rival refitted (default 6; "
+        "0: off)",
+    )
+    p.add_argument(
+        "--pool",
+        metavar="POOL.csv",
+        default=None,
+        help="choose the --discriminate rows from this file's rows (configurations and "
+        "loads; default: random feasible poses under vertical and horizontal loads)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="POSES.csv",
+        default=None,
+        help="write the --discriminate rows as a design file (measure them, add them, run "
+        "discover again)",
+    )
     add_tree_arguments(p)
     p.set_defaults(func=run)
 
@@ -71,13 +95,26 @@ def run(args: argparse.Namespace) -> int:
         inputs={"the data file": args.data, "the robot file": args.robot},
         size=1_000_000,  # a PNG of a few hundred kB
     )
+    check_output_path(
+        args.output, "--output", inputs={"the data file": args.data, "the pool": args.pool}
+    )
+    if args.discriminate < 0:
+        raise ValueError(f"--discriminate must be 0 or more, got {args.discriminate}")
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
+    pool = (
+        None
+        if args.pool is None
+        else read_dataset(args.pool, robot, require_deflection=False, ignore_deflection=True)
+    )
     show = not args.no_progress and sys.stderr.isatty()
     rep = discover(
         robot,
         data,
         refine=args.refine,
+        discriminate=args.discriminate,
+        pool=pool,
+        seed=args.seed or 0,
         progress=(lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr))
         if show
         else None,
@@ -85,6 +122,20 @@ def run(args: argparse.Namespace) -> int:
     for line in rep.warnings():
         print(f"jaxcal discover: warning: {line}", file=sys.stderr)
     code = _report(rep, args)
+    if args.output is not None:
+        if rep.discrimination is None:
+            print(
+                f"jaxcal discover: nothing to tell apart, {args.output} not written",
+                file=sys.stderr,
+            )
+        else:
+            from .._io import write_dataset
+
+            try:
+                write_dataset(args.output, rep.discrimination.rows, deflection=False)
+            except OSError as e:
+                return output_failed("discover", e, "the report is printed, the poses are not")
+            print(f"jaxcal discover: wrote {args.output}", file=sys.stderr)
     if args.plot:
         import matplotlib
 

@@ -35,7 +35,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="robots given as a kinematic tree: hold N rows out (drawn by --seed) and report "
         "their 3-D marker error before and after",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the --test rows (default 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of the --test rows, or of the random poses --discriminate chooses from "
+        "(default 0)",
+    )
 
 
 def run_tree(args: argparse.Namespace) -> int:
@@ -53,7 +59,7 @@ def run_tree(args: argparse.Namespace) -> int:
         raise ValueError("--candidates: every group named is already in --params")
     train = test = None
     if args.test is not None:
-        tr, te = split_rows(len(data), args.test, args.seed)
+        tr, te = split_rows(len(data), args.test, args.seed or 0)
         train, test = data.subset(tr), data.subset(te)
     show = not args.no_progress and sys.stderr.isatty()
     found = discover_tree(
@@ -79,7 +85,7 @@ def run_tree(args: argparse.Namespace) -> int:
     if args.json:
         out = found.to_json()
         if held is not None:
-            out["held_out"] = {"rows": args.test, "seed": args.seed, **held}
+            out["held_out"] = {"rows": args.test, "seed": args.seed or 0, **held}
         print_json(out)
     else:
         _print(found, held)

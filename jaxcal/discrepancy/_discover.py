@@ -49,19 +49,18 @@ from .._io import Dataset
 from .._model.candidates import Candidate, default_candidates
 from .._plausibility import check_loaded
 from .._robot import Robot
+from ._discriminate import discriminating_rows, separating_configurations
 from ._heldout import heldout_residuals
 from ._look_again import FirstFit, look_again
+from ._ranking import build_report, rank_candidates
 from ._report import (
     DECISIVE_BIC,
     CandidateResult,
     DiscoveryReport,
     chi2_sf,
-    residual_structure,
-    rms_mm,
-    separating_configurations,
 )
 from ._screening import candidate_free, linear_screen, preload_scan, secant_columns
-from ._supermodel import MAX_STEPS, BatchFit, SuperModel
+from ._supermodel import MAX_STEPS, SuperModel
 
 __all__ = [
     "DiscoveryReport",
@@ -86,6 +85,9 @@ def discover_batch(
     separate: bool = False,
     max_steps: int = MAX_STEPS,
     again: bool = True,
+    discriminate: int = 0,
+    pool: Dataset | None = None,
+    seed: int = 0,
     progress=None,
 ) -> list[DiscoveryReport]:
     """`discover` for many deflection sets measured with the same design (rows of
@@ -93,6 +95,9 @@ def discover_batch(
 
     `deflections` is `(S, n, 3)` m. Returns one `DiscoveryReport` per set. `again`:
     where an effect is named, look for a second one beside it (`_look_again.py`).
+    `discriminate` (with `separate`): where two candidates cannot be told apart, choose
+    that many rows of `pool` (default: random feasible ones) that would
+    (`_discriminate.py`).
     """
     if jnp.asarray(data.q).dtype != jnp.float64:
         raise ValueError(
@@ -171,7 +176,8 @@ def discover_batch(
     # 4. rank the candidates of each set; held-out residuals of the nominal model and of
     # each set's best candidate
     ranked = [
-        _rank(sm, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma[s]) for s in range(S)
+        rank_candidates(sm, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma[s])
+        for s in range(S)
     ]
     best_fits = [
         refined[(s, cands.index(best.candidate))]
@@ -185,7 +191,7 @@ def discover_batch(
     reports = []
     firsts: dict[int, FirstFit] = {}
     for s in range(S):
-        rep = _report(
+        rep = build_report(
             sm, data, cands, s, nom, fits, refined, *ranked[s], sigma[s], held_nom[s], held
         )
         if rep.effect != "none":
@@ -199,157 +205,28 @@ def discover_batch(
                 rep.heldout_rms_after_mm,
             )
         if separate and rep.ambiguous_with:
-            params = {
-                r.label: fits.params[refined[(s, cands.index(r.candidate))]]
-                for r in rep.candidates
-                if r.refined
+            at = {
+                r.label: refined[(s, cands.index(r.candidate))] for r in rep.candidates if r.refined
             }
-            rep.separating = separating_configurations(sm, data, rep, params)
+            rep.separating = separating_configurations(
+                sm, data, rep, {k: fits.params[j] for k, j in at.items()}
+            )
+            if discriminate:
+                say(f"choosing {discriminate} rows that tell {rep.best} from its rival")
+                fab = {k: (fits.params[j], fits.free[j], fits.residuals[j]) for k, j in at.items()}
+                rep.discrimination = discriminating_rows(
+                    sm, data, fab, rep.best, rep.ambiguous_with[0], discriminate, pool, seed=seed
+                )
         reports.append(rep)
     if again and firsts:
         say(f"looking again: a second effect beside the first in {len(firsts)} data sets")
         more = look_again(sm, cands, firsts, deflections, sigma, refine=refine, max_steps=max_steps)
         for s, m in more.items():
             reports[s].second = m
+            if m["named"]:  # the first effect's size is that of the model with both
+                reports[s].params = reports[s].best_params = m["first_params"]
+                reports[s].words = m["first_words"]
     return reports
-
-
-def _usable(fits: BatchFit, j: int) -> bool:
-    # A fit that ran out of LM steps still bounds its candidate's minimum χ² from above
-    # (conservative for ΔBIC); its model must be valid and its Jacobian of full rank.
-    return bool(fits.valid[j] and fits.well[j])
-
-
-def _rank(sm, cands, s, nom, fits, refined, lin, lin_delta, lnN, sigma):
-    """Every candidate's result for set `s`, best ΔBIC first, and the best: the best
-    eligible (fully fitted, usable, physical) one, else the best screened one."""
-    N = 3 * sm.n
-    chi2_0 = float(nom.chi2[s])
-    results: list[CandidateResult] = []
-    for i, c in enumerate(cands):
-        sl = sm.slices[i]
-        if (s, i) in refined:
-            j = refined[(s, i)]
-            chi2 = float(fits.chi2[j]) if _usable(fits, j) else float("inf")
-            vals = fits.params[j][sl]
-            stds = np.sqrt(np.abs(np.diag(fits.cov[j])[sl]))
-            rms = rms_mm(fits.residuals[j])
-            ok = _usable(fits, j)
-        else:
-            chi2 = chi2_0 - float(lin[s, i])
-            vals = lin_delta[s][i][sl]
-            stds = np.full(c.n_params, np.nan)
-            rms = float(np.sqrt(max(chi2, 0.0) / N) * np.mean(sigma) * 1e3)
-            ok = True
-        dchi2 = chi2_0 - chi2
-        results.append(
-            CandidateResult(
-                c,
-                dchi2 - c.n_params * lnN,
-                chi2,
-                rms,
-                np.asarray(vals),
-                stds,
-                ok and bool(c.physical(np.asarray(vals))),
-                (s, i) in refined,
-                chi2_sf(dchi2, c.n_params),
-            )
-        )
-    results.sort(key=lambda r: -r.delta_bic)
-    eligible = [r for r in results if r.eligible]
-    return results, (eligible[0] if eligible else results[0])
-
-
-def _report(sm, data, cands, s, nom, fits, refined, results, best, sigma, held_nom, held):
-    N = 3 * len(data)
-    p0 = sm.n_nominal
-    chi2_0 = float(nom.chi2[s])
-    nu0 = N - p0
-    ib = cands.index(best.candidate)
-
-    held_before = rms_mm(held_nom)
-    if (s, ib) in refined and best.refined:
-        j = refined[(s, ib)]
-        held_best = rms_mm(held[j]) if j in held else float("inf")
-        res_best = fits.residuals[j]
-        chi2_b = float(fits.chi2[j])
-        cov_b = fits.cov[j]
-        params_b = fits.params[j]
-    else:
-        held_best, res_best, chi2_b = float("inf"), nom.residuals[s], chi2_0
-        cov_b, params_b = nom.cov[s], nom.params[s]
-    chosen = (
-        best.eligible
-        and best.delta_bic >= DECISIVE_BIC
-        and np.isfinite(held_best)
-        and held_best < held_before
-    )
-    nu1 = N - p0 - best.candidate.n_params
-    amb = (
-        [
-            r.label
-            for r in results
-            if r is not best
-            and r.eligible
-            and best.delta_bic - r.delta_bic < 10.0
-            and r.delta_bic >= DECISIVE_BIC
-        ]
-        if chosen
-        else []
-    )
-
-    def named(names, p, cov, sl):
-        sd = np.sqrt(np.abs(np.diag(cov)))
-        ks = range(*sl.indices(len(p)))
-        return {names[k]: (float(p[k]), float(sd[k])) for k in ks}
-
-    nominal = named(sm.names, nom.params[s], nom.cov[s], slice(0, p0))
-    change = np.asarray(nom.residuals[s]) - np.asarray(res_best)  # model with − without
-    best_named = {
-        f"{best.candidate.label}.{n}": (float(v), float(sd))
-        for n, v, sd in zip(best.candidate.param_names, best.params, best.stds, strict=True)
-    }
-    rep = DiscoveryReport(
-        effect=best.candidate.name if chosen else "none",
-        joint=best.candidate.joint if chosen else None,
-        words=best.candidate.words(best.params, best.stds) if chosen else "no missing effect",
-        params=best_named if chosen else {},
-        n_rows=len(data),
-        dof_before=nu0,
-        dof_after=nu1 if chosen else nu0,
-        rms_before_mm=rms_mm(nom.residuals[s]),
-        rms_after_mm=rms_mm(res_best) if chosen else rms_mm(nom.residuals[s]),
-        rms_axis_before_mm=tuple(
-            float(x) for x in np.sqrt(np.mean(nom.residuals[s] ** 2, 0)) * 1e3
-        ),
-        rms_axis_after_mm=tuple(
-            float(x)
-            for x in np.sqrt(np.mean((res_best if chosen else nom.residuals[s]) ** 2, 0)) * 1e3
-        ),
-        chi2_red_before=chi2_0 / nu0,
-        chi2_red_after=(chi2_b / nu1) if chosen else chi2_0 / nu0,
-        p_value_before=chi2_sf(chi2_0, nu0),
-        p_value_after=chi2_sf(chi2_b, nu1) if chosen else chi2_sf(chi2_0, nu0),
-        delta_bic=best.delta_bic,
-        lr_p_value=best.lr_p_value,
-        heldout_rms_before_mm=held_before,
-        heldout_rms_after_mm=held_best if chosen else held_before,
-        best=best.label,
-        candidates=results,
-        ambiguous_with=amb,
-        structure_before=residual_structure(nom.residuals[s], sigma, data, sm.groups),
-        structure_after=residual_structure(res_best, sigma, data, sm.groups),
-        residuals_before=nom.residuals[s],
-        residuals_after=res_best,
-        nominal_params=nominal if not chosen else named(sm.names, params_b, cov_b, slice(0, p0)),
-        nominal_converged=bool(nom.converged[s]),
-        sigma_mm=float(np.mean(sigma) * 1e3),
-        sigma_rows_mm=np.asarray(sigma, float) * 1e3,
-        best_params=best_named,
-        change_rms_mm=float(np.sqrt(np.mean(np.sum(change**2, axis=1))) * 1e3),
-        change_max_mm=float(np.max(np.linalg.norm(change, axis=1)) * 1e3),
-    )
-    return rep
 
 
 def discover(
@@ -359,6 +236,9 @@ def discover(
     candidates: tuple[Candidate, ...] | None = None,
     refine: int = 3,
     max_steps: int = MAX_STEPS,
+    discriminate: int = 0,
+    pool: Dataset | None = None,
+    seed: int = 0,
     progress=None,
 ) -> DiscoveryReport:
     """Find the effect the nominal model misses in `data`, or `"none"`.
@@ -371,6 +251,9 @@ def discover(
     - `candidates`: the effects to try (default `default_candidates(robot)`).
     - `refine`: how many of the best-screened candidates get a full nonlinear fit.
     - `max_steps`: Levenberg–Marquardt step budget of each fit (`SuperModel.fit`).
+    - `discriminate`: where the best candidate cannot be told from its runner-up, choose
+      this many rows (configurations and loads) that would (`report.discrimination`),
+      from `pool` (a design or data set; default random feasible poses drawn by `seed`).
 
     Returns a `DiscoveryReport`: the effect in words with its fitted parameters ± std,
     the gap before and after (RMS, χ²_red, ΔBIC, held-out RMS), every candidate's ΔBIC,
@@ -391,6 +274,9 @@ def discover(
         refine=refine,
         separate=True,
         max_steps=max_steps,
+        discriminate=discriminate,
+        pool=pool,
+        seed=seed,
         progress=progress,
     )
     return reps[0]

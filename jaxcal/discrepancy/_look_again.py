@@ -68,10 +68,12 @@ def look_again(
     refine: int,
     max_steps: int,
 ) -> dict[int, dict]:
-    """For each set `s` of `firsts`: the second effect named (a dict: `label`, `name`,
-    `joint`, `words`, `params` `{name: (value, std)}`, `delta_bic`, `rms_after_mm`,
-    `heldout_before_mm`, `heldout_after_mm`, `change_rms_mm`, `change_max_mm`), or `None`
-    with the best candidate's `delta_bic` under `"best"` when none is."""
+    """For each set `s` of `firsts`: a dict with `named`; if a second effect is named,
+    its `label`, `name`, `joint`, `words`, `params` `{name: (value, std)}`,
+    `first_params` and `first_words` (the first effect refitted beside it),
+    `delta_bic`, `chi2` and `dof` of the fit with both, `rms_after_mm`,
+    `heldout_before_mm`, `heldout_after_mm`, `change_rms_mm`, `change_max_mm`; if not,
+    the best candidate (`best`) and its `delta_bic`."""
     sets = sorted(firsts)
     if not sets:
         return {}
@@ -134,7 +136,10 @@ def look_again(
             out[s] = {"named": False, "best": cands[j].label if j >= 0 else None, "delta_bic": dbic}
             continue
         c, sl = cands[j], sm.slices[j]
-        vals, stds = fits.params[m][sl], np.sqrt(np.abs(np.diag(fits.cov[m])[sl]))
+        sd_all = np.sqrt(np.abs(np.diag(fits.cov[m])))
+        vals, stds = fits.params[m][sl], sd_all[sl]
+        first = cands[f.index]
+        fsl = sm.slices[f.index]
         change = np.asarray(f.residuals) - np.asarray(fits.residuals[m])
         size = np.linalg.norm(change, axis=1) * 1e3
         out[s] = {
@@ -147,7 +152,17 @@ def look_again(
                 f"{c.label}.{n}": (float(v), float(sd))
                 for n, v, sd in zip(c.param_names, vals, stds, strict=True)
             },
+            # The first effect refitted beside the second: its size in the final model.
+            "first_params": {
+                f"{first.label}.{n}": (float(v), float(sd))
+                for n, v, sd in zip(
+                    first.param_names, fits.params[m][fsl], sd_all[fsl], strict=True
+                )
+            },
+            "first_words": first.words(fits.params[m][fsl], sd_all[fsl]),
             "delta_bic": dbic,
+            "chi2": float(fits.chi2[m]),
+            "dof": N - int(np.sum(fits.free[m])),
             "rms_after_mm": rms_mm(fits.residuals[m]),
             "heldout_before_mm": f.heldout_mm,
             "heldout_after_mm": held_after,

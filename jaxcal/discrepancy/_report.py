@@ -7,6 +7,7 @@ candidates."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import jax.numpy as jnp
 import jax.scipy.special as jsp
@@ -15,7 +16,6 @@ import numpy as np
 from .._io import Dataset
 from .._model.candidates import Candidate
 from .._parameters import parameter_units
-from ._supermodel import SuperModel
 
 __all__ = [
     "DiscoveryReport",
@@ -70,7 +70,9 @@ class CandidateResult:
 class DiscoveryReport:
     """Result of `discover` for one data set (numbers in mm where named so).
 
-    `effect` is the chosen candidate's name or `"none"`; `joint` its joint or None.
+    `effect` is the chosen candidate's name or `"none"`; `joint` its joint or None;
+    `words` and `params` its size in the final model (beside the second effect, where
+    the second look names one: `second`).
     `before`/`after` statistics refer to the nominal model and to the model with the
     best candidate (after = before when `effect == "none"`, except that `delta_bic` and
     the held-out error of the best candidate are still given for inspection).
@@ -123,6 +125,9 @@ class DiscoveryReport:
     #: the second effect's `label`, `words`, `params`, `delta_bic` against the model with
     #: the first, held-out RMS and change at the data's poses (mm); `None`: not looked.
     second: dict | None = None
+    #: Rows that would tell the best candidate from its runner-up (`_discriminate.py`),
+    #: where they cannot be told apart and `discover` was asked for them.
+    discrimination: Any = None
 
     @property
     def effects(self) -> list[str]:
@@ -224,9 +229,16 @@ class DiscoveryReport:
             "second": None
             if self.second is None
             else {
-                **{k: v for k, v in self.second.items() if k != "params"},
+                **{
+                    k: v
+                    for k, v in self.second.items()
+                    if k not in ("params", "first_params", "first_words")
+                },
                 **({"size": self.sizes(self.second["params"])} if self.second["named"] else {}),
             },
+            "discrimination": None
+            if self.discrimination is None
+            else _discrimination_json(self.discrimination),
             "warnings": self.warnings(),
         }
 
@@ -280,7 +292,14 @@ class DiscoveryReport:
                 f"Cannot be told apart from {', '.join(self.ambiguous_with)} with these data "
                 "(ΔBIC within 10)."
             )
-            for s in self.separating[:3]:
+            d = self.discrimination
+            if d is not None:
+                lines.append(
+                    f"  {len(d.rows)} rows chosen to tell them apart (T-optimal): the rival "
+                    f"refitted leaves χ² {d.t_before:.1f} on these data, {d.t_after:.1f} with "
+                    f"them; differences {', '.join(f'{x:.1f}' for x in d.difference_sigma)} σ"
+                )
+            for s in self.separating[: 0 if d is not None else 3]:
                 lines.append(
                     f"  measure configuration {s['configuration']} (row {s['row']}) with load "
                     f"{s['load']}: predictions differ by {s['difference_sigma']:.1f} σ"
@@ -355,47 +374,17 @@ def rms_mm(res_m: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.asarray(res_m) ** 2)) * 1e3)
 
 
-def separating_configurations(
-    sm: SuperModel, data: Dataset, rep: DiscoveryReport, params: dict[str, np.ndarray]
-) -> list[dict]:
-    """Measurements that would tell the best candidate from its runner-up: each model's
-    prediction for the data's configurations under alternative loads (horizontal ±x,
-    ±y and vertical at the data's largest force, vertical at half of it); the five
-    largest differences in units of σ. `params` maps candidate labels to their fitted
-    SuperModel parameter vectors."""
-    pa, pb = params[rep.best], params[rep.ambiguous_with[0]]
-    fmax = float(np.max(np.linalg.norm(np.asarray(data.force), axis=1)))
-    loads = {
-        "+x": (fmax, 0, 0),
-        "-x": (-fmax, 0, 0),
-        "+y": (0, fmax, 0),
-        "-y": (0, -fmax, 0),
-        "-z": (0, 0, -fmax),
-        "-z/2": (0, 0, -fmax / 2),
+def _discrimination_json(d) -> dict:
+    return {
+        "between": [d.a, d.b],
+        "t_before": d.t_before,
+        "t_after": d.t_after,
+        "rows": [
+            {
+                "q_deg": np.rad2deg(np.asarray(d.rows.q[i])).round(4).tolist(),
+                "force_N": np.asarray(d.rows.force[i]).round(3).tolist(),
+                "difference_sigma": float(d.difference_sigma[i]),
+            }
+            for i in range(len(d.rows))
+        ],
     }
-    sigma_mm = rep.sigma_mm
-    found = []
-    for name, f in loads.items():
-        alt = Dataset(
-            data.q,
-            jnp.broadcast_to(jnp.asarray(f, float), data.force.shape),
-            jnp.zeros_like(data.moment),
-            None,
-            data.sigma,
-        )
-        other = sm.with_design(alt)
-        dp, ok = other.predict(np.stack([pa, pb]))
-        diff = np.linalg.norm(dp[0] - dp[1], axis=1) * 1e3 / sigma_mm
-        for g in np.unique(other.groups):
-            row = int(np.flatnonzero(other.groups == g)[0])
-            found.append(
-                {
-                    "configuration": int(g),
-                    "row": row + 1,
-                    "q_deg": np.rad2deg(np.asarray(data.q[row])).round(2).tolist(),
-                    "load": f"{name} {fmax:.0f} N" if "/" not in name else f"-z {fmax / 2:.0f} N",
-                    "difference_sigma": float(diff[row]),
-                }
-            )
-    found.sort(key=lambda d: -d["difference_sigma"])
-    return found[:5]

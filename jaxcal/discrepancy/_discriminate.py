@@ -1,0 +1,195 @@
+"""Poses that tell two candidate effects apart: a model-discrimination design.
+
+When the data fit two candidates about equally (`DiscoveryReport.ambiguous_with`), new
+measurements should go where the two fitted models disagree *after* each has been
+refitted to them: T-optimality (Atkinson & Fedorov 1975). With `A` and `B` the two
+fits, the criterion of a set of rows is the lack of fit the rival leaves when refitted
+to the other's predictions on the data's rows and the new ones,
+
+    T_B|A = min_δ ‖W (η_A − η_B − J_B δ)‖²,   W = 1/σ,
+
+linearised at B's fit (`J_B` its σ-weighted Jacobian in its free parameters), and the
+design maximises `min(T_B|A, T_A|B)`, so that it tells them apart whichever is true.
+K rows are chosen greedily from a pool (the candidate file of `--pool`, or random
+feasible configurations under vertical and horizontal loads); `T` is in units of χ²:
+the expected ΔBIC between the two after measuring the rows is about `T − Δp·ln N`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import Dataset, configurations
+from .._model.equilibrium import measured_deflections, with_unloaded
+from ._report import DiscoveryReport
+from ._supermodel import SuperModel
+
+__all__ = ["Discrimination", "discriminating_rows", "default_pool", "separating_configurations"]
+
+
+class Discrimination(NamedTuple):
+    """K rows that tell `a` from `b` (labels): `rows` (a design: configurations and
+    loads, σ of the data), `pool_index` (their rows in the pool), `difference_sigma` (the
+    3-D difference of the two fits' predictions at each row, in σ), `t_before` and
+    `t_after`: `min(T_B|A, T_A|B)` on the data's rows alone and with the K rows (χ²)."""
+
+    a: str
+    b: str
+    rows: Dataset
+    pool_index: np.ndarray
+    difference_sigma: np.ndarray
+    t_before: float
+    t_after: float
+
+
+def default_pool(sm: SuperModel, data: Dataset, n: int = 400, seed: int = 0) -> Dataset:
+    """`n` random feasible configurations, each under a vertical and a horizontal load
+    (the design module's candidate pool, 2n rows), σ of the data."""
+    from ..design._bound import candidate_pool
+
+    q, force, _ = candidate_pool(sm.robot, n, seed=seed, loads="mixed")
+    m = len(q)
+    sigma = float(np.mean(np.asarray(data.sigma)))
+    return Dataset(
+        jnp.asarray(q, data.q.dtype),
+        jnp.asarray(force, data.q.dtype),
+        jnp.zeros((m, 3), data.q.dtype),
+        None,
+        jnp.full((m,), sigma, data.q.dtype),
+    )
+
+
+def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray):
+    """Predictions (B, m, 3) m of `pool` at each parameter vector and their Jacobian
+    (B, m, 3, P) in every parameter, by forward mode through the equilibria."""
+    q_unique, inv = configurations(pool.q)
+    design = (*with_unloaded(pool.q, pool.force, pool.moment, jnp.asarray(q_unique)), inv)
+
+    @eqx.filter_jit
+    def run(p, design):
+        def model(p):
+            q_all, f_all, m_all, inverse = design
+            robot = sm.to_robot(p)
+            dp, ok = measured_deflections(robot, q_all, f_all, m_all, jnp.asarray(inverse))
+            return dp, (dp, ok)
+
+        def one(p):
+            J, (dp, ok) = jax.jacfwd(model, has_aux=True)(p)
+            return dp, ok, J
+
+        return jax.vmap(one)(p)
+
+    y, ok, J = run(jnp.asarray(params), design)
+    return np.asarray(y), np.asarray(ok), np.asarray(J)
+
+
+def _lack_of_fit(d: np.ndarray, J: np.ndarray) -> float:
+    """‖d − J δ‖² at the least-squares δ (σ-weighted, flattened)."""
+    delta, *_ = np.linalg.lstsq(J, d, rcond=None)
+    r = d - J @ delta
+    return float(r @ r)
+
+
+def discriminating_rows(
+    sm: SuperModel,
+    data: Dataset,
+    fits: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+    a: str,
+    b: str,
+    k: int,
+    pool: Dataset | None = None,
+    *,
+    seed: int = 0,
+) -> Discrimination:
+    """The `k` rows of `pool` (default `default_pool`) that tell candidate `a` from `b`
+    (see the module docstring). `fits` maps a label to its fit to `data`: the
+    parameter vector (user units), the free mask and the residuals (n, 3) m."""
+    if k < 1:
+        raise ValueError(f"k must be at least 1, got {k}")
+    pool = default_pool(sm, data, seed=seed) if pool is None else pool
+    pa, fa, ra = fits[a]
+    pb, fb, rb = fits[b]
+    sig_d = np.asarray(data.sigma, float)[:, None]
+    sig_p = np.asarray(pool.sigma, float)[:, None]
+    # The data's rows: both models fit them; they differ there by r_b − r_a.
+    d_data = ((rb - ra) / sig_d).reshape(-1)
+    jac = sm.jacobian(np.stack([pa, pb]), np.stack([data.sigma, data.sigma]))
+    Ja_d, Jb_d = jac[0][:, fa], jac[1][:, fb]
+    y, ok, J = _model_and_jacobian(sm, pool, np.stack([pa, pb]))
+    d_pool = (y[0] - y[1]) / sig_p  # (m, 3)
+    Ja_p = J[0][..., fa] / sig_p[..., None]
+    Jb_p = J[1][..., fb] / sig_p[..., None]
+    usable = ok[0] & ok[1]
+
+    def t_of(rows: list[int]) -> float:
+        d = np.concatenate([d_data, d_pool[rows].reshape(-1)])
+        JA = np.concatenate([Ja_d, Ja_p[rows].reshape(-1, Ja_p.shape[-1])])
+        JB = np.concatenate([Jb_d, Jb_p[rows].reshape(-1, Jb_p.shape[-1])])
+        return min(_lack_of_fit(d, JB), _lack_of_fit(-d, JA))
+
+    chosen: list[int] = []
+    for _ in range(min(k, int(usable.sum()))):
+        best, best_t = -1, -math.inf
+        for i in np.flatnonzero(usable):
+            if i in chosen:
+                continue
+            t = t_of([*chosen, int(i)])
+            if t > best_t:
+                best, best_t = int(i), t
+        chosen.append(best)
+    idx = np.asarray(chosen, int)
+    rows = Dataset(pool.q[idx], pool.force[idx], pool.moment[idx], None, pool.sigma[idx])
+    diff = np.linalg.norm(d_pool[idx], axis=1)
+    return Discrimination(a, b, rows, idx, diff, t_of([]), t_of(chosen))
+
+
+def separating_configurations(
+    sm: SuperModel, data: Dataset, rep: DiscoveryReport, params: dict[str, np.ndarray]
+) -> list[dict]:
+    """Measurements that would tell the best candidate from its runner-up: each model's
+    prediction for the data's configurations under alternative loads (horizontal ±x,
+    ±y and vertical at the data's largest force, vertical at half of it); the five
+    largest differences in units of σ. `params` maps candidate labels to their fitted
+    SuperModel parameter vectors."""
+    pa, pb = params[rep.best], params[rep.ambiguous_with[0]]
+    fmax = float(np.max(np.linalg.norm(np.asarray(data.force), axis=1)))
+    loads = {
+        "+x": (fmax, 0, 0),
+        "-x": (-fmax, 0, 0),
+        "+y": (0, fmax, 0),
+        "-y": (0, -fmax, 0),
+        "-z": (0, 0, -fmax),
+        "-z/2": (0, 0, -fmax / 2),
+    }
+    sigma_mm = rep.sigma_mm
+    found = []
+    for name, f in loads.items():
+        alt = Dataset(
+            data.q,
+            jnp.broadcast_to(jnp.asarray(f, float), data.force.shape),
+            jnp.zeros_like(data.moment),
+            None,
+            data.sigma,
+        )
+        other = sm.with_design(alt)
+        dp, ok = other.predict(np.stack([pa, pb]))
+        diff = np.linalg.norm(dp[0] - dp[1], axis=1) * 1e3 / sigma_mm
+        for g in np.unique(other.groups):
+            row = int(np.flatnonzero(other.groups == g)[0])
+            found.append(
+                {
+                    "configuration": int(g),
+                    "row": row + 1,
+                    "q_deg": np.rad2deg(np.asarray(data.q[row])).round(2).tolist(),
+                    "load": f"{name} {fmax:.0f} N" if "/" not in name else f"-z {fmax / 2:.0f} N",
+                    "difference_sigma": float(diff[row]),
+                }
+            )
+    found.sort(key=lambda d: -d["difference_sigma"])
+    return found[:5]
