@@ -56,7 +56,7 @@ def register(sub) -> None:
         metavar="POOL.csv",
         default=None,
         help="choose the --discriminate rows from this file's rows (configurations and "
-        "loads; default: random feasible poses under vertical and horizontal loads)",
+        "loads; default: random feasible poses under the data's largest force along ±x, ±y, −z)",
     )
     p.add_argument(
         "-o",

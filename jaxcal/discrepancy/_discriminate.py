@@ -11,8 +11,9 @@ to the other's predictions on the data's rows and the new ones,
 linearised at B's fit (`J_B` its σ-weighted Jacobian in its free parameters), and the
 design maximises `min(T_B|A, T_A|B)`, so that it tells them apart whichever is true.
 K rows are chosen greedily from a pool (the candidate file of `--pool`, or random
-feasible configurations under vertical and horizontal loads); `T` is in units of χ²:
-the expected ΔBIC between the two after measuring the rows is about `T − Δp·ln N`.
+feasible configurations under the data's largest force along ±x, ±y and −z); `T` is in
+units of χ²: the expected ΔBIC between the two after measuring the rows is about
+`T − Δp·ln N`.
 """
 
 from __future__ import annotations
@@ -49,19 +50,26 @@ class Discrimination(NamedTuple):
 
 
 def default_pool(sm: SuperModel, data: Dataset, n: int = 400, seed: int = 0) -> Dataset:
-    """`n` random feasible configurations, each under a vertical and a horizontal load
-    (the design module's candidate pool, 2n rows), σ of the data."""
+    """`n` random feasible configurations (the design module's candidate pool), each
+    under the data's largest force along +x, −x, +y, −y and −z (5n rows), σ of the data:
+    where a dead band or a nonlinearity shows depends on which joint torques the load
+    reverses, which the direction sets."""
     from ..design._bound import candidate_pool
 
-    q, force, _ = candidate_pool(sm.robot, n, seed=seed, loads="mixed")
-    m = len(q)
+    q, _, _ = candidate_pool(sm.robot, n, seed=seed)
+    fmax = float(np.max(np.linalg.norm(np.asarray(data.force), axis=1)))
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, -1]], float)
+    qq = np.repeat(q, len(dirs), axis=0)
+    force = np.tile(dirs * fmax, (len(q), 1))
+    m = len(qq)
     sigma = float(np.mean(np.asarray(data.sigma)))
+    dt = data.q.dtype
     return Dataset(
-        jnp.asarray(q, data.q.dtype),
-        jnp.asarray(force, data.q.dtype),
-        jnp.zeros((m, 3), data.q.dtype),
+        jnp.asarray(qq, dt),
+        jnp.asarray(force, dt),
+        jnp.zeros((m, 3), dt),
         None,
-        jnp.full((m,), sigma, data.q.dtype),
+        jnp.full((m,), sigma, dt),
     )
 
 
