@@ -48,14 +48,18 @@ def run_tree(args: argparse.Namespace) -> int:
     """`jaxcal discover` for a tree robot."""
     from .._identification.elastogeometric import marker_errors, split_rows
     from .._identification.parameter_groups import parse_groups
-    from ..discrepancy._tree import discover_tree, tree_candidates
+    from ..discrepancy._tree import candidate_robot, discover_tree, tree_candidates
 
     check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
     robot, data = load_tree_data(args)
     nominal = parse_groups(args.params, robot)
-    groups = None if args.candidates is None else parse_groups(args.candidates, robot)
-    cands = tree_candidates(robot, nominal, groups)
-    if not cands:
+    look = (
+        (*parse_groups(None, robot), "masses", "spring-laws")
+        if args.candidates is None
+        else parse_groups(args.candidates, robot)
+    )
+    with_laws = "spring-laws" in look and "spring-laws" not in nominal
+    if not tree_candidates(candidate_robot(robot) if with_laws else robot, nominal, look):
         raise ValueError("--candidates: every group named is already in --params")
     train = test = None
     if args.test is not None:
@@ -66,7 +70,7 @@ def run_tree(args: argparse.Namespace) -> int:
         robot,
         data if train is None else train,
         nominal,
-        candidates=cands,
+        groups=look,
         progress=(lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr))
         if show
         else None,

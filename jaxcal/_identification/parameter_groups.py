@@ -155,7 +155,8 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
         elif g == "spring-laws":
             for k, law in enumerate(robot.laws):
                 for key, field, factor in law.keys:
-                    typical = max(abs(float(getattr(law, field))) * 1e-2, 1e-6)
+                    value = abs(float(getattr(law, field)))
+                    typical = max(value * 1e-2, 1e-6) if value > 0 else law.typical.get(field, 1e-6)
                     out.append(
                         Parameter(
                             f"{law.law}{k}.{field}",

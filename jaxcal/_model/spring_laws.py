@@ -25,6 +25,7 @@ from jaxtyping import Array, ArrayLike, Float
 __all__ = [
     "SpringLaw",
     "CompensatorLaw",
+    "JointHardening",
     "SPRING_LAWS",
     "compensator_length",
     "spring_law_from_dict",
@@ -40,15 +41,23 @@ def compensator_length(lc: ArrayLike, l2: ArrayLike, phi: ArrayLike) -> Array:
 
 class SpringLaw(eqx.Module):
     """A spring law acting on the link-side angle of the active joint `joint` (index in
-    the robot's `joint_names`)."""
+    the robot's `joint_names`), or, where `acts_on` is `"deflection"`, on the deflection
+    `θ` of that joint's spring."""
 
     joint: eqx.AbstractVar[int]
     #: The parameters' robot-file keys, each `(key, field, factor from SI)`.
     keys: ClassVar[tuple[tuple[str, str, float], ...]] = ()
     law: ClassVar[str] = ""
+    #: What the potential's argument is: `"link"` (the link-side angle `q + θ`) or
+    #: `"deflection"` (`θ`).
+    acts_on: ClassVar[str] = "link"
+    #: A typical size of each parameter (SI), for those whose value may be 0 ("absent").
+    typical: ClassVar[dict[str, float]] = {}
+    #: The parameters whose sign is physical either way (the others are magnitudes).
+    signed: ClassVar[tuple[str, ...]] = ()
 
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
-        """Energy (J) at the link-side angle `phi` (rad)."""
+        """Energy (J) at the angle `phi` (rad) it acts on."""
         raise NotImplementedError
 
 
@@ -73,7 +82,34 @@ class CompensatorLaw(SpringLaw):
         return 0.5 * self.Kc * (s - self.s0) ** 2
 
 
-SPRING_LAWS: dict[str, type[SpringLaw]] = {"compensator": CompensatorLaw}
+#: Reference joint deflection (rad) of `JointHardening`: 1 mrad, a typical deflection
+#: of a joint under its arm's weight.
+THETA_REF = 1e-3
+
+
+class JointHardening(SpringLaw):
+    """A joint spring that stiffens (`h > 0`) or softens with its deflection `θ`: the
+    energy `¼·h·(θ/θ_ref)⁴` added to the linear spring's, so that the torque gains
+    `h·θ³/θ_ref⁴` and the stiffness `3h/θ_ref²` at `|θ| = θ_ref` (`h` in J; 0: absent).
+    The joint-stiffness nonlinearity of a harmonic drive, for any robot."""
+
+    h: Float[Array, ""]
+    joint: int = eqx.field(static=True)
+    keys: ClassVar[tuple[tuple[str, str, float], ...]] = (("h_J", "h", 1.0),)
+    law: ClassVar[str] = "joint_hardening"
+    acts_on: ClassVar[str] = "deflection"
+    # A 10 % stiffness change at 1 mrad of a 10⁵ N·m/rad joint: 3h/θ_ref² = 10⁴.
+    typical: ClassVar[dict[str, float]] = {"h": 3e-3}
+    signed: ClassVar[tuple[str, ...]] = ("h",)  # softening is a physical law too
+
+    def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
+        return 0.25 * self.h * (phi / THETA_REF) ** 4
+
+
+SPRING_LAWS: dict[str, type[SpringLaw]] = {
+    "compensator": CompensatorLaw,
+    "joint_hardening": JointHardening,
+}
 
 
 def spring_law_from_dict(d: dict, where: str, joints: dict[str, int]) -> SpringLaw:

@@ -193,7 +193,12 @@ def potential(
     u = gravity_potential(robot, q, phi)
     if robot.laws:
         link = link_angles(robot, q, phi)
-        u = u + sum(law.potential(link[law.joint]) for law in robot.laws)
+        row = {e: i for i, e in enumerate(robot.revolute)}
+        for law in robot.laws:
+            if law.acts_on == "deflection":  # the joint's own spring deflection θ
+                u = u + law.potential(phi[row[robot.drive[law.joint]], 0])
+            else:
+                u = u + law.potential(link[law.joint])
     if force is not None:
         u = u - jnp.dot(force, marker_pose(robot, q, phi, at)[1])
     return u

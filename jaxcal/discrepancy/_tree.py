@@ -29,9 +29,11 @@ family at a time.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
+import jax.numpy as jnp
 import numpy as np
 
 from .._identification.elastogeometric import (
@@ -51,12 +53,14 @@ from .._identification.parameter_groups import (
 )
 from .._identification.result import Z95
 from .._markers import MarkerData
+from .._model.spring_laws import JointHardening
 from .._model.tree import TreeRobot
 from ._heldout import press
 from ._report import DECISIVE_BIC
 from ._tree_report import TreeCandidate, TreeDiscovery, TreeEffect
 
 __all__ = [
+    "candidate_robot",
     "TreeCandidate",
     "TreeEffect",
     "TreeDiscovery",
@@ -65,8 +69,36 @@ __all__ = [
 ]
 
 
-def _owner(p: Parameter) -> str:
+def _owner(robot: TreeRobot, p: Parameter) -> str:
+    if p.group == "spring-laws":  # `laws.K.field`: the law and the joint it acts on
+        law = robot.laws[int(p.field.split(".")[1])]
+        return f"{law.law}[{robot.joint_names[law.joint]}]"
     return p.name.rsplit(".", 2)[0] if p.group == "origins" else p.name.rsplit(".", 1)[0]
+
+
+def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
+    """`(P,)` whether each parameter is a magnitude that cannot be negative (a spring, a
+    mass, a law's constant other than its `signed` ones)."""
+    out = np.array([p.group in MAGNITUDE_GROUPS for p in table])
+    for k, p in enumerate(table):
+        if p.group == "spring-laws":
+            _, law, field = p.field.split(".")
+            out[k] = field not in robot.laws[int(law)].signed
+    return out
+
+
+def candidate_robot(robot: TreeRobot) -> TreeRobot:
+    """`robot` with an absent (`h = 0`) `JointHardening` law on every revolute joint
+    that has a joint spring and none yet: the joint-stiffness nonlinearity as a
+    candidate of every such joint (a spring law's parameters are candidates of the
+    `spring-laws` group)."""
+    have = {law.joint for law in robot.laws if isinstance(law, JointHardening)}
+    new = tuple(
+        JointHardening(h=jnp.zeros((), robot.world.dtype), joint=j)
+        for j, e in enumerate(robot.drive)
+        if j not in have and robot.springs[e][0] and not robot.sliding[e]
+    )
+    return dataclasses.replace(robot, laws=robot.laws + new) if new else robot
 
 
 def tree_candidates(
@@ -82,7 +114,7 @@ def tree_candidates(
         raise ValueError(f"unknown parameter group(s) {unknown}; known: {', '.join(GROUPS)}")
     out: dict[tuple[str, str], list[str]] = {}
     for p in parameter_table(robot, tuple(g for g in groups if g not in nominal)):
-        out.setdefault((p.group, _owner(p)), []).append(p.name)
+        out.setdefault((p.group, _owner(robot, p)), []).append(p.name)
     return tuple(TreeCandidate(g, at, tuple(names)) for (g, at), names in out.items())
 
 
@@ -134,7 +166,7 @@ def _loo_rms_mm(J: np.ndarray, r: np.ndarray, rows: np.ndarray, sigma: np.ndarra
 
 
 def _forward(
-    J, r, cal, fitted, skip, cands, cols, rows, sigma, steps_out
+    J, r, cal, fitted, positive, skip, cands, cols, rows, sigma, steps_out
 ) -> list[tuple[int, dict]]:
     """Greedy forward selection on the linear model `r ≈ J δ` from the `fitted` columns;
     returns `(candidate index, step)` for each family added, and appends every step
@@ -165,7 +197,7 @@ def _forward(
         rss0 = float(res @ res)
         scale2 = (rss0 - drop) / max(N - len(A) - s.size, 1)
         size = _size(cal.table, cal.estimate, cols[i], *_step(B, s, V, res, scale2))
-        if any(d["high95"] < 0 for d in size if cal.table[cols[i][0]].group in MAGNITUDE_GROUPS):
+        if any(d["high95"] < 0 for d, k in zip(size, cols[i], strict=True) if positive[k]):
             steps_out.append(
                 {"label": cands[i].label, "delta_rss": drop, "unphysical": True, "size": size}
             )
@@ -225,6 +257,7 @@ def discover_tree(
     nominal: tuple[str, ...],
     *,
     candidates: tuple[TreeCandidate, ...] | None = None,
+    groups: tuple[str, ...] | None = None,
     rounds: int = 3,
     max_steps: int = 300,
     progress=None,
@@ -232,7 +265,10 @@ def discover_tree(
     """Find the parameter families the calibration of the `nominal` groups lacks in
     `data` (absolute marker measurements), or none (see the module docstring).
 
-    `candidates`: the families to try (default `tree_candidates(robot, nominal)`);
+    `candidates`: the families to try (default: `tree_candidates` of the parameter
+    `groups`, default those of the full calibration, masses and spring laws; where spring
+    laws are candidates, a joint-stiffness nonlinearity on every joint too:
+    `candidate_robot`);
     `rounds`: how many times the search looks again after a nonlinear refit. Returns a
     `TreeDiscovery`; its `final` calibration has the named families fitted.
 
@@ -248,7 +284,13 @@ def discover_tree(
     unknown = [g for g in nominal if g not in GROUPS]
     if unknown:
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
-    cands = tree_candidates(robot, nominal) if candidates is None else tuple(candidates)
+    if candidates is None:
+        look = (*default_groups(robot), "masses", "spring-laws") if groups is None else groups
+        if "spring-laws" in look and "spring-laws" not in nominal:
+            robot = candidate_robot(robot)
+        cands = tree_candidates(robot, nominal, look)
+    else:
+        cands = tuple(candidates)
     if not cands:
         raise ValueError("no candidates to test")
     say = progress or (lambda msg: None)
@@ -260,6 +302,7 @@ def discover_tree(
     if missing:
         raise ValueError(f"candidates: unknown parameter(s) {missing[:5]}")
     cols = [np.array([index[n] for n in c.names]) for c in cands]
+    positive = positive_parameters(robot, table)
 
     def calibrate(chosen: list[int]) -> TreeCalibration:
         on = {n for i in chosen for n in cands[i].names}
@@ -289,7 +332,7 @@ def discover_tree(
         fitted = cal.fitted.copy()
         for i in chosen:  # a chosen family counts as fitted even where the data pivot it out
             fitted[cols[i]] = True
-        added = _forward(J, r, cal, fitted, skip, cands, cols, rows, sigma, steps)
+        added = _forward(J, r, cal, fitted, positive, skip, cands, cols, rows, sigma, steps)
         if not added:
             break
         say(f"fitting {', '.join(cands[i].label for i, _ in added)} with the full model")
@@ -310,13 +353,15 @@ def discover_tree(
 
     effects = []
     for i, step in found:
-        params, units = {}, {}
+        params, units, signed = {}, {}, []
         for n in cands[i].names:
             k = index[n]
             p = table[k]
             if cal.fitted[k]:
                 params[n] = (float(cal.estimate[k] * p.factor), float(cal.std[k] * p.factor))
                 units[n] = p.unit
+                if not positive[k]:
+                    signed.append(n)
         effects.append(
             TreeEffect(
                 candidate=cands[i],
@@ -329,6 +374,7 @@ def discover_tree(
                 change_max_mm=step["change_max_mm"],
                 params=params,
                 units=units,
+                signed=tuple(signed),
             )
         )
     return TreeDiscovery(

@@ -8,7 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._identification.elastogeometric import MAGNITUDE_GROUPS, TreeCalibration
+from .._identification.elastogeometric import TreeCalibration
 from .._identification.result import Z95
 from ._report import DECISIVE_BIC
 
@@ -46,6 +46,9 @@ class TreeCandidate(NamedTuple):
             return (
                 "measurement frame error" if self.at == "world" else f"offset of marker {self.at}"
             )
+        if self.group == "spring-laws" and "[" in self.at:  # `law[joint]`
+            law, _, joint = self.at.partition("[")
+            return f"{law.replace('_', ' ')} at {joint.rstrip(']')}"
         return f"{WORDS[self.group]} at {self.at}"
 
 
@@ -66,6 +69,9 @@ class TreeEffect:
     change_max_mm: float
     params: dict[str, tuple[float, float]] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    #: The parameters whose sign is physical either way (errors about zero, a law's
+    #: signed constants); the others are magnitudes.
+    signed: tuple[str, ...] = ()
 
     def sizes(self) -> list[dict]:
         """Per parameter: `value`, `std`, the 95 % interval `low95`/`high95`, `unit`."""
@@ -155,10 +161,8 @@ class TreeDiscovery:
         95 % interval: it stands for other parameters' errors, not for a spring."""
         out = []
         for e in self.effects:
-            if e.candidate.group not in MAGNITUDE_GROUPS:
-                continue
             for d in e.sizes():
-                if d["high95"] < 0:
+                if d["high95"] < 0 and d["name"] not in e.signed:
                     out.append(
                         f"{d['name']} = {d['value']:.4g} ± {d['std']:.2g} {d['unit']} is negative: "
                         "an alias of other parameters' errors, not to be read as a spring or mass"
