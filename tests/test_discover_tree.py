@@ -166,6 +166,34 @@ def test_simulated_lateral_springs_are_named_where_they_are(justin, data):
     assert found.rms_after_mm < 1.2 * np.sqrt(3) * SIGMA * 1e3 < found.rms_before_mm
 
 
+def test_ambiguous_families_are_said_and_poses_proposed(justin, data):
+    # The lateral springs of right_2 and right_3 move the markers almost alike at these
+    # poses (first canonical correlation 0.9999 after the nominal fit): with one hidden,
+    # the other fits within ΔBIC 10. The search says so and proposes poses by the
+    # T-criterion, which cannot lose what the data already separate.
+    c = justin.compliance.at[jnp.asarray(justin.revolute), 0].set(8e-6)
+    c = c.at[justin.names.index("right_3"), 1:].set(jnp.array([40e-6, 25e-6]))
+    truth = eqx.tree_at(lambda r: r.compliance, justin, c)
+    sub = data.subset(np.arange(120))
+    plan = jaxcal.MarkerData(q=sub.q, markers=None, seen=sub.seen, sigma=np.full(120, SIGMA))
+    y, _ = jaxcal.predicted_markers(truth, plan)
+    noisy = y + np.random.default_rng(3).normal(size=y.shape) * SIGMA
+    sim = jaxcal.MarkerData(q=sub.q, markers=noisy, seen=sub.seen, sigma=plan.sigma)
+    found = jaxcal.discover_tree(
+        justin, sim, ("frames", "joint-compliance"), groups=("lateral-compliance",), discriminate=4
+    )
+    (effect,) = found.effects
+    pair = {effect.candidate.label, effect.rival}
+    assert pair == {"lateral-compliance[right_2]", "lateral-compliance[right_3]"}
+    assert abs(effect.delta_bic - effect.rival_delta_bic) < 10
+    d = found.discrimination
+    assert d is not None and (d.a, d.b) == (effect.candidate.label, effect.rival)
+    assert len(d.plan) == 4 and d.t_after >= d.t_before
+    assert "Cannot be told from" in found.summary() and "poses chosen" in found.summary()
+    assert found.to_json()["discrimination"]["between"] == [d.a, d.b]
+
+
+@pytest.mark.usefixtures("optimised_test")  # fits of 300 poses: compiled to run fast
 def test_real_data_names_lateral_compliance(justin, data, capsys):
     """The published protocol's split (200 rows held out, seed 0)."""
     args = ["discover", str(DATA), "--robot", "dlr_agile_justin", "--params", ",".join(NOMINAL)]

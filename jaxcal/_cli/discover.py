@@ -123,11 +123,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"jaxcal discover: warning: {line}", file=sys.stderr)
     code = _report(rep, args)
     if args.output is not None:
-        if rep.discrimination is None:
-            print(
-                f"jaxcal discover: nothing to tell apart, {args.output} not written",
-                file=sys.stderr,
-            )
+        told = rep.discrimination
+        from ..discrepancy._report import DECISIVE_BIC
+
+        if told is None or told.t_after < DECISIVE_BIC:
+            why = "nothing to tell apart" if told is None else "no pose tells them apart"
+            print(f"jaxcal discover: {why}, {args.output} not written", file=sys.stderr)
         else:
             from .._io import write_dataset
 

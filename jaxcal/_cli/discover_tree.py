@@ -48,10 +48,18 @@ def run_tree(args: argparse.Namespace) -> int:
     """`jaxcal discover` for a tree robot."""
     from .._identification.elastogeometric import marker_errors, split_rows
     from .._identification.parameter_groups import parse_groups
-    from ..discrepancy._tree import candidate_robot, discover_tree, tree_candidates
+    from .._markers import read_markers
+    from ..discrepancy._tree import discover_tree
+    from ..discrepancy._tree_candidates import candidate_robot, tree_candidates
 
     check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
+    check_output_path(
+        args.output, "--output", inputs={"the data file": args.data, "the pool": args.pool}
+    )
+    if args.discriminate < 0:
+        raise ValueError(f"--discriminate must be 0 or more, got {args.discriminate}")
     robot, data = load_tree_data(args)
+    pool = None if args.pool is None else read_markers(args.pool, robot, require_markers=False)
     nominal = parse_groups(args.params, robot)
     look = (
         (*parse_groups(None, robot), "masses", "spring-laws")
@@ -71,6 +79,9 @@ def run_tree(args: argparse.Namespace) -> int:
         data if train is None else train,
         nominal,
         groups=look,
+        discriminate=args.discriminate,
+        pool=pool,
+        seed=args.seed or 0,
         progress=(lambda msg: print(f"jaxcal discover: {msg} ...", file=sys.stderr))
         if show
         else None,
@@ -93,6 +104,24 @@ def run_tree(args: argparse.Namespace) -> int:
         print_json(out)
     else:
         _print(found, held)
+    if args.output is not None:
+        told = found.discrimination
+        from ..discrepancy._report import DECISIVE_BIC
+
+        if told is None or told.t_after < DECISIVE_BIC:
+            why = "nothing to tell apart" if told is None else "no pose tells them apart"
+            print(f"jaxcal discover: {why}, {args.output} not written", file=sys.stderr)
+        else:
+            import numpy as np
+
+            from .._markers import write_markers
+
+            blank = np.full((len(told.plan), len(robot.marker_names), 3), np.nan)
+            try:
+                write_markers(args.output, told.plan, robot, blank)
+            except OSError as e:
+                return output_failed("discover", e, "the report is printed, the poses are not")
+            print(f"jaxcal discover: wrote {args.output}", file=sys.stderr)
     if args.plot:
         import matplotlib
 

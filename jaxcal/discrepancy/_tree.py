@@ -29,15 +29,12 @@ family at a time.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._identification.elastogeometric import (
-    MAGNITUDE_GROUPS,
     PIVOT_RCOND,
     TreeCalibration,
     calibrate_tree,
@@ -47,16 +44,17 @@ from .._identification.elastogeometric import (
 )
 from .._identification.parameter_groups import (
     GROUPS,
-    Parameter,
     default_groups,
+    get_vector,
     parameter_table,
 )
 from .._identification.result import Z95
 from .._markers import MarkerData
-from .._model.spring_laws import JointHardening
 from .._model.tree import TreeRobot
 from ._heldout import press
 from ._report import DECISIVE_BIC
+from ._tree_candidates import candidate_robot, positive_parameters, tree_candidates
+from ._tree_discriminate import discriminate_tree
 from ._tree_report import TreeCandidate, TreeDiscovery, TreeEffect
 
 __all__ = [
@@ -67,55 +65,6 @@ __all__ = [
     "tree_candidates",
     "discover_tree",
 ]
-
-
-def _owner(robot: TreeRobot, p: Parameter) -> str:
-    if p.group == "spring-laws":  # `laws.K.field`: the law and the joint it acts on
-        law = robot.laws[int(p.field.split(".")[1])]
-        return f"{law.law}[{robot.joint_names[law.joint]}]"
-    return p.name.rsplit(".", 2)[0] if p.group == "origins" else p.name.rsplit(".", 1)[0]
-
-
-def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
-    """`(P,)` whether each parameter is a magnitude that cannot be negative (a spring, a
-    mass, a law's constant other than its `signed` ones)."""
-    out = np.array([p.group in MAGNITUDE_GROUPS for p in table])
-    for k, p in enumerate(table):
-        if p.group == "spring-laws":
-            _, law, field = p.field.split(".")
-            out[k] = field not in robot.laws[int(law)].signed
-    return out
-
-
-def candidate_robot(robot: TreeRobot) -> TreeRobot:
-    """`robot` with an absent (`h = 0`) `JointHardening` law on every revolute joint
-    that has a joint spring and none yet: the joint-stiffness nonlinearity as a
-    candidate of every such joint (a spring law's parameters are candidates of the
-    `spring-laws` group)."""
-    have = {law.joint for law in robot.laws if isinstance(law, JointHardening)}
-    new = tuple(
-        JointHardening(h=jnp.zeros((), robot.world.dtype), joint=j)
-        for j, e in enumerate(robot.drive)
-        if j not in have and robot.springs[e][0] and not robot.sliding[e]
-    )
-    return dataclasses.replace(robot, laws=robot.laws + new) if new else robot
-
-
-def tree_candidates(
-    robot: TreeRobot, nominal: tuple[str, ...], groups: tuple[str, ...] | None = None
-) -> tuple[TreeCandidate, ...]:
-    """The candidate families of `robot` in the parameter `groups` that `nominal` does not
-    fit (default: the full calibration's groups, masses and spring laws), one per place,
-    in parameter-table order."""
-    if groups is None:
-        groups = (*default_groups(robot), "masses", "spring-laws")
-    unknown = [g for g in (*nominal, *groups) if g not in GROUPS]
-    if unknown:
-        raise ValueError(f"unknown parameter group(s) {unknown}; known: {', '.join(GROUPS)}")
-    out: dict[tuple[str, str], list[str]] = {}
-    for p in parameter_table(robot, tuple(g for g in groups if g not in nominal)):
-        out.setdefault((p.group, _owner(robot, p)), []).append(p.name)
-    return tuple(TreeCandidate(g, at, tuple(names)) for (g, at), names in out.items())
 
 
 # -- the linearised search -------------------------------------------------------------------
@@ -183,17 +132,15 @@ def _forward(
     left = [i for i in range(len(cands)) if not fitted[cols[i]].any() and i not in skip]
     added = []
     while left:
-        best = None
+        tried = []
         for i in left:
             U, s, V = _orthogonal(Q, J[:, cols[i]])
-            if s.size == 0:
-                continue
-            drop = float(np.sum((U.T @ res) ** 2))
-            if best is None or drop > best[1]:
-                best = (i, drop, U, s, V)
-        if best is None:
+            if s.size:
+                tried.append((float(np.sum((U.T @ res) ** 2)), i, U, s, V))
+        if not tried:
             break
-        i, drop, B, s, V = best
+        tried.sort(key=lambda t: -t[0])
+        drop, i, B, s, V = tried[0]
         rss0 = float(res @ res)
         scale2 = (rss0 - drop) / max(N - len(A) - s.size, 1)
         size = _size(cal.table, cal.estimate, cols[i], *_step(B, s, V, res, scale2))
@@ -223,6 +170,12 @@ def _forward(
             "unphysical": False,
             "chosen": bool(dbic >= DECISIVE_BIC and loo1 < loo),
         }
+        if len(tried) > 1:
+            # The runner-up, and whether these data can tell it from the chosen one.
+            drop2, i2, _, s2, _ = tried[1]
+            dbic2 = N * math.log(rss0 / max(rss0 - drop2, 1e-300)) - s2.size * lnN
+            if dbic2 >= DECISIVE_BIC and dbic - dbic2 < DECISIVE_BIC:
+                step["rival"], step["rival_delta_bic"] = cands[i2].label, dbic2
         steps_out.append(step)
         if not step["chosen"]:
             break
@@ -260,6 +213,9 @@ def discover_tree(
     groups: tuple[str, ...] | None = None,
     rounds: int = 3,
     max_steps: int = 300,
+    discriminate: int = 0,
+    pool: MarkerData | None = None,
+    seed: int = 0,
     progress=None,
 ) -> TreeDiscovery:
     """Find the parameter families the calibration of the `nominal` groups lacks in
@@ -269,8 +225,11 @@ def discover_tree(
     `groups`, default those of the full calibration, masses and spring laws; where spring
     laws are candidates, a joint-stiffness nonlinearity on every joint too:
     `candidate_robot`);
-    `rounds`: how many times the search looks again after a nonlinear refit. Returns a
-    `TreeDiscovery`; its `final` calibration has the named families fitted.
+    `rounds`: how many times the search looks again after a nonlinear refit.
+    `discriminate`: where a named family's runner-up fits about as well, choose that
+    many poses of `pool` (default random poses within the limits, drawn by `seed`) that
+    would tell them apart (`_tree_discriminate.py`). Returns a `TreeDiscovery`; its
+    `final` calibration has the named families fitted.
 
     ```python
     found = jaxcal.discover_tree(robot, data, ("frames", "joint-offsets", "dh", "joint-compliance"))
@@ -351,6 +310,10 @@ def discover_tree(
         J, r, rows, sigma = _linearised(cal, data)
     loo_after = _loo_rms_mm(J[:, cal.fitted], r, rows, sigma)
 
+    named = {cands[i].label for i, _ in found}
+    for _, step in found:  # a runner-up named too is no rival: both are in the model
+        if step.get("rival") in named:
+            del step["rival"], step["rival_delta_bic"]
     effects = []
     for i, step in found:
         params, units, signed = {}, {}, []
@@ -375,7 +338,26 @@ def discover_tree(
                 params=params,
                 units=units,
                 signed=tuple(signed),
+                rival=step.get("rival"),
+                rival_delta_bic=step.get("rival_delta_bic"),
             )
+        )
+    told = None
+    rivals = [(i, step) for i, step in found if "rival" in step]
+    if discriminate and rivals:
+        i, step = rivals[0]
+        j = [c.label for c in cands].index(step["rival"])
+        say(f"choosing {discriminate} poses that tell {cands[i].label} from {cands[j].label}")
+        start = np.asarray(get_vector(robot, table), float)
+        told = discriminate_tree(
+            cal,
+            data,
+            start,
+            (cands[i].label, cols[i]),
+            (cands[j].label, cols[j]),
+            discriminate,
+            pool,
+            seed=seed,
         )
     return TreeDiscovery(
         nominal_groups=tuple(nominal),
@@ -390,4 +372,5 @@ def discover_tree(
         rounds=done,
         n_candidates=len(cands),
         seconds=time.perf_counter() - t0,
+        discrimination=told,
     )

@@ -4,7 +4,7 @@ family with its size in its units, and the search as a whole (summary, JSON, plo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -72,6 +72,9 @@ class TreeEffect:
     #: The parameters whose sign is physical either way (errors about zero, a law's
     #: signed constants); the others are magnitudes.
     signed: tuple[str, ...] = ()
+    #: A runner-up that these data cannot tell from it (ΔBIC within 10), and its ΔBIC.
+    rival: str | None = None
+    rival_delta_bic: float | None = None
 
     def sizes(self) -> list[dict]:
         """Per parameter: `value`, `std`, the 95 % interval `low95`/`high95`, `unit`."""
@@ -107,6 +110,8 @@ class TreeDiscovery:
     rounds: int
     n_candidates: int
     seconds: float
+    #: Poses that would tell an ambiguous family from its rival (`_tree_discriminate.py`).
+    discrimination: Any = None
 
     @property
     def effect(self) -> str:
@@ -154,6 +159,24 @@ class TreeDiscovery:
             f"Gap: RMS {self.rms_before_mm:.3f} → {self.rms_after_mm:.3f} mm, leave-one-row-out "
             f"{self.loo_before_mm:.3f} → {self.loo_after_mm:.3f} mm.",
         ]
+        for e in self.effects:
+            if e.rival:
+                lines.append(
+                    f"Cannot be told from {e.rival} with these data: {e.candidate.label} ΔBIC "
+                    f"{e.delta_bic:.1f}, {e.rival} {e.rival_delta_bic:.1f}."
+                )
+        d = self.discrimination
+        if d is not None:
+            lines.append(
+                f"{len(d.plan)} poses chosen to tell {d.a} from {d.b} (T-optimal): the rival "
+                f"refitted leaves χ² {d.t_before:.1f} on these data, {d.t_after:.1f} with them"
+                + (
+                    "."
+                    if d.t_after >= DECISIVE_BIC
+                    else f" (below {DECISIVE_BIC:g}: no pose of the pool tells them apart; at "
+                    "these markers they may be one effect)."
+                )
+            )
         return "\n".join(lines)
 
     def warnings(self) -> list[str]:
@@ -203,6 +226,8 @@ class TreeDiscovery:
                     "at": e.candidate.at,
                     "words": e.candidate.words,
                     "delta_bic": e.delta_bic,
+                    "rival": e.rival,
+                    "rival_delta_bic": e.rival_delta_bic,
                     "loo_rms_before_mm": e.loo_before_mm,
                     "loo_rms_after_mm": e.loo_after_mm,
                     "change_rms_mm": e.change_rms_mm,
@@ -212,6 +237,14 @@ class TreeDiscovery:
                 for e in self.effects
             ],
             "steps": self.steps,
+            "discrimination": None
+            if self.discrimination is None
+            else {
+                "between": [self.discrimination.a, self.discrimination.b],
+                "t_before": self.discrimination.t_before,
+                "t_after": self.discrimination.t_after,
+                "q": np.asarray(self.discrimination.plan.q).tolist(),
+            },
             "warnings": self.warnings(),
             "converged": bool(self.final.converged),
             "seconds": self.seconds,
