@@ -35,7 +35,10 @@ compliances absorb is no discrepancy — the calibrated nominal model already pr
    configuration with leverage above 0.5 (a dead band that shows in one or two
    configurations) is refitted without it instead.
 4. **Ambiguity**: when the runner-up is within 10 of the best BIC, both are reported with
-   the measurements (configuration × load) whose predictions differ most between them.
+   the measurements (configuration × load) whose predictions differ most between them,
+   and on request the rows that would tell them apart (`_discriminate.py`).
+5. **A second look**: with an effect named, every other candidate is tried beside it on
+   the same rule (`_look_again.py`), so that two hidden effects are both named.
 """
 
 from __future__ import annotations

@@ -8,8 +8,10 @@ family at a time.
 2. **Candidates** (`tree_candidates`): each parameter family the nominal model does not
    fit, per place: the two lateral springs of one joint (link bending at its root), the
    joint spring of one joint, the geometric errors of one joint, one point mass, the
-   measurement frame, one marker's offset, one spring law's constants. They apply to
-   any robot file: a family is a set of entries of the robot's parameter table.
+   measurement frame, one marker's offset, one spring law's constants, and where spring
+   laws are candidates a joint-stiffness nonlinearity of every joint (`candidate_robot`
+   puts an absent `JointHardening` law on each). They apply to any robot file: a family
+   is a set of entries of the robot's parameter table (`_tree_candidates.py`).
 3. **Greedy forward selection** on the model linearised at the current fit: the
    candidate whose columns, orthogonalised against the fitted ones, take the largest
    share of the σ-weighted residual is added while it is decisive and predicts better.
@@ -24,7 +26,11 @@ family at a time.
 4. **Sizes**: each named family's parameters with their standard deviations and 95 %
    intervals from the final fit, in their printed units, and what the family changes
    at the data's poses when it is added (RMS and largest 3-D change of the fitted
-   predictions, mm, from the linearised step).
+   predictions, mm, from the linearised step). A step that would make a spring or a
+   mass negative beyond its 95 % interval is skipped: the alias of other errors.
+5. **Ambiguity**: a named family whose runner-up (not named itself) is within ΔBIC 10
+   of it is said so, and poses that would tell them apart are proposed on request
+   (`_tree_discriminate.py`).
 """
 
 from __future__ import annotations
