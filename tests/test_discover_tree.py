@@ -125,6 +125,36 @@ def test_hidden_joint_hardening_is_named_and_sized():
     assert not found.warnings()  # a softening or hardening law may have either sign
 
 
+def test_cli_any_robot_file(tmp_path, capsys):
+    # A user's own robot file and marker data, as the command line takes them: the
+    # hardening is named in the table and in --json, and with nothing ambiguous no poses
+    # file is written.
+    kappa, h, sigma = 2e-6, 2e-2, 1e-5
+    robot_file = tmp_path / "pendulum.json"
+    robot_file.write_text(json.dumps(jaxcal.tree_to_dict(_pendulum(kappa * 1.3, None))))
+    truth = _pendulum(kappa, h)
+    q = np.linspace(-np.pi, np.pi, 37)[:-1, None]
+    plan = jaxcal.MarkerData(
+        q=q, markers=None, seen=np.ones((36, 1), bool), sigma=np.full(36, sigma)
+    )
+    y, _ = jaxcal.predicted_markers(truth, plan)
+    noisy = y + np.random.default_rng(5).normal(size=y.shape) * sigma
+    data_file = tmp_path / "data.csv"
+    jaxcal.write_markers(data_file, plan, truth, noisy)
+    args = ["discover", str(data_file), "--robot", str(robot_file)]
+    args += ["--params", "frames,joint-compliance", "--candidates", "spring-laws"]
+    poses = tmp_path / "poses.csv"
+    assert main([*args, "-o", str(poses)]) == 0
+    out, err = capsys.readouterr()
+    assert "Missing: joint hardening at q1 (1 family of 1 candidate, 2 rounds)" in out
+    assert "nothing to tell apart" in err and not poses.exists()
+    assert main([*args, "--json"]) == 0
+    j = json.loads(capsys.readouterr().out)
+    assert j["where"] == {"spring-laws": ["joint_hardening[q1]"]} and j["discrimination"] is None
+    (size,) = j["effects"][0]["size"]
+    assert size["unit"] == "J" and size["low95"] < h < size["high95"]
+
+
 def test_candidates_are_families_per_place(justin):
     cands = jaxcal.tree_candidates(justin, ("frames",), ("frames", "lateral-compliance"))
     assert not any(c.group == "frames" for c in cands)  # the nominal model fits them

@@ -152,10 +152,17 @@ class TreeDiscovery:
                 f"{self.rms_before_mm:.3f} mm, leave-one-row-out {self.loo_before_mm:.3f} mm"
                 f"{tail}."
             )
-        places = "; ".join(f"{WORDS[g]} at {', '.join(at)}" for g, at in self.where().items())
+        places = "; ".join(
+            # A spring law's family names its law and joint in its own words.
+            "; ".join(e.candidate.words for e in self.effects if e.candidate.group == g)
+            if g == "spring-laws"
+            else f"{WORDS[g]} at {', '.join(at)}"
+            for g, at in self.where().items()
+        )
         lines = [
-            f"Missing: {places} ({len(self.effects)} families of {self.n_candidates} "
-            f"candidates, {self.rounds} rounds).",
+            f"Missing: {places} ({_count(len(self.effects), 'family', 'families')} of "
+            f"{_count(self.n_candidates, 'candidate', 'candidates')}, "
+            f"{_count(self.rounds, 'round', 'rounds')}).",
             f"Gap: RMS {self.rms_before_mm:.3f} → {self.rms_after_mm:.3f} mm, leave-one-row-out "
             f"{self.loo_before_mm:.3f} → {self.loo_after_mm:.3f} mm.",
         ]
@@ -249,3 +256,7 @@ class TreeDiscovery:
             "converged": bool(self.final.converged),
             "seconds": self.seconds,
         }
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
