@@ -20,10 +20,14 @@ def register(sub) -> None:
             "candidate effect (compensator, link bending, backlash, joint nonlinearity, "
             "tool compliance, and a tracker-rotation decoy), fit the best K with the full "
             "equilibrium model and choose one only if it is decisively better (ΔBIC ≥ 10) "
-            "and lowers the leave-one-configuration-out error. Prints the effect, its "
-            "parameters and the gap before and after, and warns when the final model still "
-            "does not fit (χ² p-value below 0.001). Loads that are zero in every row are an "
-            "error."
+            "and lowers the leave-one-configuration-out error; with one named, look again "
+            "for a second beside it. Prints the effects, their sizes and the gap before and "
+            "after, warns when the final model still does not fit (χ² p-value below 0.001), "
+            "and where two candidates fit about equally chooses rows that would tell them "
+            "apart. Loads that are zero in every row are an error. For a robot given as a "
+            "kinematic tree (absolute marker data) the candidates are the parameter "
+            "families that the --params calibration does not fit, and a joint-stiffness "
+            "nonlinearity per joint."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")
