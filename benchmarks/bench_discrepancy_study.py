@@ -41,7 +41,8 @@ import jaxcal  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _study_module():
+def study_module():
+    """`notebooks/_discrepancy_study.py` as a module (it is not a package)."""
     spec = importlib.util.spec_from_file_location(
         "_discrepancy_study", ROOT / "notebooks" / "_discrepancy_study.py"
     )
@@ -72,7 +73,7 @@ def main() -> None:
     ap.add_argument("--perturbed", action="store_true")
     ap.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     args = ap.parse_args()
-    study = _study_module()
+    study = study_module()
     robot = jaxcal.load_robot()
     data = jaxcal.read_dataset(ROOT / "tests" / "data" / "example_calibration.csv", robot)
     t0 = time.perf_counter()

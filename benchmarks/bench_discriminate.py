@@ -15,7 +15,6 @@ Run: `python benchmarks/bench_discriminate.py [--case "backlash[3]"] [--k 6] [--
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import time
 from pathlib import Path
 
@@ -24,20 +23,11 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
+from bench_discrepancy_study import study_module  # noqa: E402  (a sibling script: its folder is on sys.path)
 
 import jaxcal  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _study_module():
-    spec = importlib.util.spec_from_file_location(
-        "_discrepancy_study", ROOT / "notebooks" / "_discrepancy_study.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def main() -> None:
@@ -46,7 +36,7 @@ def main() -> None:
     ap.add_argument("--k", type=int, default=6)
     ap.add_argument("--seeds", type=int, default=10)
     args = ap.parse_args()
-    st = _study_module()
+    st = study_module()
     robot = jaxcal.load_robot()
     example = jaxcal.read_dataset(ROOT / "tests" / "data" / "example_calibration.csv", robot)
     data = st.study_design(example)

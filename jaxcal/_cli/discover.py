@@ -6,8 +6,13 @@ import argparse
 import sys
 
 from .._format import format_table
-from .discover_tree import add_arguments as add_tree_arguments, run_tree
-from .main import add_robot_argument, check_output_path, output_failed, print_json
+from .discover_tree import (
+    add_arguments as add_tree_arguments,
+    check_outputs,
+    run_tree,
+    write_outputs,
+)
+from .main import add_robot_argument, check_output_path, print_json
 
 
 def register(sub) -> None:
@@ -99,11 +104,7 @@ def run(args: argparse.Namespace) -> int:
         inputs={"the data file": args.data, "the robot file": args.robot},
         size=1_000_000,  # a PNG of a few hundred kB
     )
-    check_output_path(
-        args.output, "--output", inputs={"the data file": args.data, "the pool": args.pool}
-    )
-    if args.discriminate < 0:
-        raise ValueError(f"--discriminate must be 0 or more, got {args.discriminate}")
+    check_outputs(args)
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     pool = (
@@ -125,40 +126,20 @@ def run(args: argparse.Namespace) -> int:
     )
     for line in rep.warnings():
         print(f"jaxcal discover: warning: {line}", file=sys.stderr)
-    code = _report(rep, args)
-    if args.output is not None:
-        told = rep.discrimination
-        from ..discrepancy._report import DECISIVE_BIC
+    _report(rep, args)
 
-        if told is None or told.t_after < DECISIVE_BIC:
-            why = "nothing to tell apart" if told is None else "no pose tells them apart"
-            print(f"jaxcal discover: {why}, {args.output} not written", file=sys.stderr)
-        else:
-            from .._io import write_dataset
+    def write_poses(path):
+        from .._io import write_dataset
 
-            try:
-                write_dataset(args.output, rep.discrimination.rows, deflection=False)
-            except OSError as e:
-                return output_failed("discover", e, "the report is printed, the poses are not")
-            print(f"jaxcal discover: wrote {args.output}", file=sys.stderr)
-    if args.plot:
-        import matplotlib
+        write_dataset(path, rep.discrimination.rows, deflection=False)
 
-        matplotlib.use("Agg")
-        from .._io import save_figure
-
-        try:
-            save_figure(rep.plot(), args.plot)
-        except OSError as e:
-            return output_failed("discover", e, "the report is printed, only the plot is missing")
-        print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
-    return code
+    return write_outputs(args, rep.discrimination, write_poses, rep.plot)
 
 
-def _report(rep, args: argparse.Namespace) -> int:
+def _report(rep, args: argparse.Namespace) -> None:
     if args.json:
         print_json(rep.to_json())
-        return 0
+        return
     print(rep.summary())
     print()
     print(
@@ -189,4 +170,3 @@ def _report(rep, args: argparse.Namespace) -> int:
             ],
         )
     )
-    return 0

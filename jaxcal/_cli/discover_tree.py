@@ -44,6 +44,46 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """What both forms of `discover` check before any work: `--output` can be written,
+    `--discriminate` is not negative."""
+    check_output_path(
+        args.output, "--output", inputs={"the data file": args.data, "the pool": args.pool}
+    )
+    if args.discriminate < 0:
+        raise ValueError(f"--discriminate must be 0 or more, got {args.discriminate}")
+
+
+def write_outputs(args: argparse.Namespace, told, write_poses, figure) -> int:
+    """The files both forms of `discover` write after the report: `--output`, the poses
+    that tell two candidates apart (`told`, written by `write_poses(path)`), only where
+    they would (T ≥ 10); `--plot`, the figure `figure()` draws. Returns the exit code."""
+    if args.output is not None:
+        from ..discrepancy._report import DECISIVE_BIC
+
+        if told is None or told.t_after < DECISIVE_BIC:
+            why = "nothing to tell apart" if told is None else "no pose tells them apart"
+            print(f"jaxcal discover: {why}, {args.output} not written", file=sys.stderr)
+        else:
+            try:
+                write_poses(args.output)
+            except OSError as e:
+                return output_failed("discover", e, "the report is printed, the poses are not")
+            print(f"jaxcal discover: wrote {args.output}", file=sys.stderr)
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from .._io import save_figure
+
+        try:
+            save_figure(figure(), args.plot)
+        except OSError as e:
+            return output_failed("discover", e, "the report is printed, only the plot is missing")
+        print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
 def run_tree(args: argparse.Namespace) -> int:
     """`jaxcal discover` for a tree robot."""
     from .._identification.elastogeometric import marker_errors, split_rows
@@ -53,11 +93,7 @@ def run_tree(args: argparse.Namespace) -> int:
     from ..discrepancy._tree_candidates import candidate_robot, tree_candidates
 
     check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
-    check_output_path(
-        args.output, "--output", inputs={"the data file": args.data, "the pool": args.pool}
-    )
-    if args.discriminate < 0:
-        raise ValueError(f"--discriminate must be 0 or more, got {args.discriminate}")
+    check_outputs(args)
     robot, data = load_tree_data(args)
     pool = None if args.pool is None else read_markers(args.pool, robot, require_markers=False)
     nominal = parse_groups(args.params, robot)
@@ -104,36 +140,17 @@ def run_tree(args: argparse.Namespace) -> int:
         print_json(out)
     else:
         _print(found, held)
-    if args.output is not None:
+
+    def write_poses(path):
+        import numpy as np
+
+        from .._markers import write_markers
+
         told = found.discrimination
-        from ..discrepancy._report import DECISIVE_BIC
+        blank = np.full((len(told.plan), len(robot.marker_names), 3), np.nan)
+        write_markers(path, told.plan, robot, blank)
 
-        if told is None or told.t_after < DECISIVE_BIC:
-            why = "nothing to tell apart" if told is None else "no pose tells them apart"
-            print(f"jaxcal discover: {why}, {args.output} not written", file=sys.stderr)
-        else:
-            import numpy as np
-
-            from .._markers import write_markers
-
-            blank = np.full((len(told.plan), len(robot.marker_names), 3), np.nan)
-            try:
-                write_markers(args.output, told.plan, robot, blank)
-            except OSError as e:
-                return output_failed("discover", e, "the report is printed, the poses are not")
-            print(f"jaxcal discover: wrote {args.output}", file=sys.stderr)
-    if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        from .._io import save_figure
-
-        try:
-            save_figure(found.plot(), args.plot)
-        except OSError as e:
-            return output_failed("discover", e, "the report is printed, only the plot is missing")
-        print(f"jaxcal discover: wrote {args.plot}", file=sys.stderr)
-    return 0
+    return write_outputs(args, found.discrimination, write_poses, found.plot)
 
 
 def _print(found, held) -> None:

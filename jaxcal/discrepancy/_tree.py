@@ -116,8 +116,7 @@ def _loo_rms_mm(J: np.ndarray, r: np.ndarray, rows: np.ndarray, sigma: np.ndarra
     span(J) first: at a nonlinear optimum it is so only to the fit's tolerance)."""
     Q, _ = np.linalg.qr(J)
     out, _ = press(J, r - Q @ (Q.T @ r), rows)
-    e = out.reshape(-1, 3) * sigma[:, None]
-    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))) * 1e3)
+    return _rms_mm(out, sigma)
 
 
 def _forward(
@@ -195,6 +194,7 @@ def _forward(
 
 
 def _rms_mm(r: np.ndarray, sigma: np.ndarray) -> float:
+    """RMS 3-D error (mm) of σ-weighted residuals `(3m,)` with each observation's σ."""
     e = r.reshape(-1, 3) * sigma[:, None]
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))) * 1e3)
 
