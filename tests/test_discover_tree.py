@@ -44,10 +44,12 @@ def data(justin):
     return jaxcal.read_markers(DATA, justin)
 
 
-def _pendulum(kappa: float, h: float | None):
+def _pendulum(kappa: float, h: float | None, laws: list | None = None):
     """One joint about the horizontal axis −y (origin rolled 90°), a point mass and a
-    marker at the arm's end, a joint spring and a hardening law on it (none: `h=None`)."""
-    laws = [] if h is None else [{"law": "joint_hardening", "joint": "q1", "h_J": h}]
+    marker at the arm's end, a joint spring and a hardening law on it (none: `h=None`),
+    or the spring `laws` given."""
+    if laws is None:
+        laws = [] if h is None else [{"law": "joint_hardening", "joint": "q1", "h_J": h}]
     return jaxcal.tree_from_dict(
         {
             "kind": "tree",
@@ -99,13 +101,59 @@ def test_joint_hardening_against_the_analytic_pendulum(q):
     assert float(jax.grad(theta_of)(jnp.asarray(h))) == pytest.approx(float(fd), rel=1e-6)
 
 
-def test_hidden_joint_hardening_is_named_and_sized():
+@pytest.mark.parametrize("q", [0.0, -1.0, np.pi / 2 + 1e-4])
+def test_backlash_against_the_analytic_pendulum(q):
+    # The spring's deflection is the linear one plus the smoothed dead band,
+    # θ = θ_lin + b·tanh(θ_lin/w), θ_lin = −κ·m g L cos(q + θ): solved by bisection, at
+    # a pose under full load and at one where the torque is within the band.
+    kappa, b, g = 2e-6, 1e-4, 9.80665
+    robot = _pendulum(kappa, None, [{"law": "backlash", "joint": "q1", "b_urad": b * 1e6}])
+    eq = jaxcal.tree_equilibrium(robot, jnp.array([q]))
+    assert bool(eq.converged)
+    w = 2.0 * np.sqrt(b**2 + 1e-12)
+
+    def balance(t):
+        lin = -kappa * PEND_M * g * PEND_L * np.cos(q + t)
+        return t - lin - b * np.tanh(lin / w)
+
+    theta = scipy.optimize.brentq(balance, -0.1, 0.1, xtol=1e-17)
+    assert float(eq.phi[0, 0]) == pytest.approx(theta, rel=1e-8, abs=1e-15)
+
+    def theta_of(bb):
+        r = eqx.tree_at(lambda r: r.laws[0].b, robot, bb)
+        return jaxcal.tree_equilibrium(r, jnp.array([q])).phi[0, 0]
+
+    db = 1e-7
+    fd = (theta_of(jnp.asarray(b + db)) - theta_of(jnp.asarray(b - db))) / (2 * db)
+    assert float(jax.grad(theta_of)(jnp.asarray(b))) == pytest.approx(float(fd), rel=1e-5)
+
+
+#: Hidden spring laws of the simulated pendulum, each with the parameter it is sized by
+#: and the unit it is printed in.
+HIDDEN_LAWS = {
+    "joint hardening": ({"law": "joint_hardening", "joint": "q1", "h_J": 2e-2}, "h_J", "J"),
+    "backlash": ({"law": "backlash", "joint": "q1", "b_urad": 100.0}, "b_urad", "µrad"),
+    "compensator": (
+        {"law": "compensator", "joint": "q1", "lc_m": 0.1, "l2_m": 0.2, "Kc_N_per_m": 1e4}
+        | {"s0_m": 0.0},
+        "Kc_N_per_m",
+        "N/m",
+    ),
+}
+
+
+@pytest.mark.parametrize("hidden", [*HIDDEN_LAWS, None])
+def test_hidden_spring_law_is_named_and_sized(hidden):
     # The pendulum swung through a full turn: the deflection follows cos(q), the
-    # hardening's torque its cube, which no joint spring reproduces. Measured at 0.01 mm;
-    # the nominal model re-identifies frames and the joint spring, the candidates are the
-    # spring laws: the hardening that `candidate_robot` puts on every joint.
-    kappa, h, sigma = 2e-6, 2e-2, 1e-5
-    truth = _pendulum(kappa, h)
+    # hardening's torque its cube, the backlash the sign of the torque, a compensator's
+    # torque sin(q); no joint spring reproduces any of them. Measured at 0.01 mm; the
+    # nominal model re-identifies frames and the joint spring, the candidates are the
+    # spring laws: the hardening and the backlash that `candidate_robot` puts on every
+    # joint and a compensator on the joint asked for. With none hidden, none is named.
+    sigma = 1e-5
+    kappa = 2e-6
+    law, key, unit = HIDDEN_LAWS[hidden] if hidden else ({}, "", "")
+    truth = _pendulum(kappa, None, [law] if law else [])
     q = np.linspace(-np.pi, np.pi, 37)[:-1, None]
     plan = jaxcal.MarkerData(
         q=q, markers=None, seen=np.ones((36, 1), bool), sigma=np.full(36, sigma)
@@ -116,13 +164,17 @@ def test_hidden_joint_hardening_is_named_and_sized():
     data = jaxcal.MarkerData(q=q, markers=noisy, seen=plan.seen, sigma=plan.sigma)
     nominal = _pendulum(kappa * 1.3, None)  # the file's spring 30 % off, no law
     found = jaxcal.discover_tree(
-        nominal, data, ("frames", "joint-compliance"), groups=("spring-laws",)
+        nominal, data, ("frames", "joint-compliance"), groups=("spring-laws",), compensators=("q1",)
     )
-    assert [e.candidate.words for e in found.effects] == ["joint hardening at q1"]
-    (d,) = found.effects[0].sizes()
-    assert d["unit"] == "J" and abs(d["value"] - h) < 4.5 * d["std"], d
-    assert found.rms_after_mm < min(1.2 * np.sqrt(3) * sigma * 1e3, found.rms_before_mm)
-    assert not found.warnings()  # a softening or hardening law may have either sign
+    assert found.n_candidates == 3
+    assert [e.candidate.words for e in found.effects] == ([f"{hidden} at q1"] if hidden else [])
+    assert found.rms_after_mm < 1.2 * np.sqrt(3) * sigma * 1e3
+    if hidden:
+        d = found.effects[0].sizes()[0]
+        truth_printed = law[key]
+        assert d["unit"] == unit and abs(d["value"] - truth_printed) < 4.5 * d["std"], d
+        assert found.rms_after_mm < found.rms_before_mm
+        assert not found.warnings()
 
 
 def test_cli_any_robot_file(tmp_path, capsys):
@@ -143,10 +195,11 @@ def test_cli_any_robot_file(tmp_path, capsys):
     jaxcal.write_markers(data_file, plan, truth, noisy)
     args = ["discover", str(data_file), "--robot", str(robot_file)]
     args += ["--params", "frames,joint-compliance", "--candidates", "spring-laws"]
+    args += ["--compensator-at", "q1"]
     poses = tmp_path / "poses.csv"
     assert main([*args, "-o", str(poses)]) == 0
     out, err = capsys.readouterr()
-    assert "Missing: joint hardening at q1 (1 family of 1 candidate, 2 rounds)" in out
+    assert "Missing: joint hardening at q1 (1 family of 3 candidates, 2 rounds)" in out
     assert "nothing to tell apart" in err and not poses.exists()
     assert main([*args, "--json"]) == 0
     j = json.loads(capsys.readouterr().out)
@@ -258,3 +311,7 @@ def test_tree_options_are_for_tree_robots(capsys):
     args = ["discover", str(DATA), "--robot", "dlr_agile_justin", "--params", "frames"]
     assert main([*args, "--candidates", "frames"]) == 2
     assert "--candidates: every group named is already in --params" in capsys.readouterr().err
+    assert main([*args, "--compensator-at", "right_9"]) == 2
+    assert "--compensator-at: no joint(s) ['right_9']" in capsys.readouterr().err
+    assert main([*args, "--candidates", "masses", "--compensator-at", "right_2"]) == 2
+    assert "--compensator-at: spring laws are not" in capsys.readouterr().err

@@ -31,8 +31,9 @@ def register(sub) -> None:
             "and where two candidates fit about equally chooses rows that would tell them "
             "apart. Loads that are zero in every row are an error. For a robot given as a "
             "kinematic tree (absolute marker data) the candidates are the parameter "
-            "families that the --params calibration does not fit, and a joint-stiffness "
-            "nonlinearity per joint."
+            "families that the --params calibration does not fit, a joint-stiffness "
+            "nonlinearity and backlash per joint, and a gravity compensator on the joints "
+            "--compensator-at names."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")
@@ -89,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (
         ("--params", args.params),
         ("--candidates", args.candidates),
+        ("--compensator-at", args.compensator_at),
         ("--test", args.test),
     ):
         if value is not None:

@@ -28,6 +28,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "full calibration, masses and spring laws that --params does not fit)",
     )
     p.add_argument(
+        "--compensator-at",
+        default=None,
+        metavar="JOINTS",
+        help="robots given as a kinematic tree: also try a gravity compensator (a spring "
+        "balancing a link's weight) on these joints, comma-separated; spring laws must be "
+        "among the candidates",
+    )
+    p.add_argument(
         "--test",
         type=int,
         default=None,
@@ -102,8 +110,15 @@ def run_tree(args: argparse.Namespace) -> int:
         if args.candidates is None
         else parse_groups(args.candidates, robot)
     )
+    compensators = tuple(j.strip() for j in (args.compensator_at or "").split(",") if j.strip())
     with_laws = "spring-laws" in look and "spring-laws" not in nominal
-    if not tree_candidates(candidate_robot(robot) if with_laws else robot, nominal, look):
+    if compensators and not with_laws:
+        raise ValueError("--compensator-at: spring laws are not among the --candidates")
+    try:
+        cand_robot = candidate_robot(robot, compensators) if with_laws else robot
+    except ValueError as e:
+        raise ValueError(f"--compensator-at: {str(e).partition(': ')[2]}") from None
+    if not tree_candidates(cand_robot, nominal, look):
         raise ValueError("--candidates: every group named is already in --params")
     train = test = None
     if args.test is not None:
@@ -115,6 +130,7 @@ def run_tree(args: argparse.Namespace) -> int:
         data if train is None else train,
         nominal,
         groups=look,
+        compensators=compensators,
         discriminate=args.discriminate,
         pool=pool,
         seed=args.seed or 0,

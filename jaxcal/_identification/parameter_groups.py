@@ -163,7 +163,7 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                             g,
                             f"laws.{k}.{field}",
                             (),
-                            key[len(field) + 1 :].replace("_per_", "/"),
+                            key[len(field) + 1 :].replace("_per_", "/").replace("urad", "µrad"),
                             factor,
                             typical,
                         )

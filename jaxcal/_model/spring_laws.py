@@ -1,11 +1,17 @@
 """Spring laws attached to a joint: elastic elements whose potential is a nonlinear
 function of one joint's link-side angle `φ = q + θ` (rad), such as a gravity
-compensator.
+compensator, or of its spring's deflection θ, such as a stiffening harmonic drive; and
+laws of lost motion, which add to the joint spring's deflection a function of the
+torque it carries (backlash).
 
-A law is an `eqx.Module` whose array fields are its parameters (SI) and whose
+A law is an `eqx.Module` whose array fields are its parameters (SI). A potential law's
 `potential(phi)` is its energy in J; the equilibrium adds it to the total potential, so
-its torque and its tangent stiffness come from autodiff. `SPRING_LAWS` maps the names
-used in robot files to the law classes; a new law is a new class in that table.
+its torque and its tangent stiffness come from autodiff. A lost-motion law
+(`acts_on = "torque"`) has no potential of that form (a dead band is a complementary
+energy): its `extra(theta_lin)` is the deflection (rad) it adds to what the linear
+spring alone gives, `θ_lin = κθ·τ`, and the equilibrium adds it to the spring's
+balance. `SPRING_LAWS` maps the names used in robot files to the law classes; a new law
+is a new class in that table.
 
 The compensator of the paper (eqs. 7–11): a linear spring of stiffness `Kc` (N/m) and
 free length `s0` (m) between two pivots at distances `lc` and `l2` from the joint axis,
@@ -26,6 +32,7 @@ __all__ = [
     "SpringLaw",
     "CompensatorLaw",
     "JointHardening",
+    "JointBacklash",
     "SPRING_LAWS",
     "compensator_length",
     "spring_law_from_dict",
@@ -42,22 +49,32 @@ def compensator_length(lc: ArrayLike, l2: ArrayLike, phi: ArrayLike) -> Array:
 class SpringLaw(eqx.Module):
     """A spring law acting on the link-side angle of the active joint `joint` (index in
     the robot's `joint_names`), or, where `acts_on` is `"deflection"`, on the deflection
-    `θ` of that joint's spring."""
+    `θ` of that joint's spring, or, where it is `"torque"`, adding to that deflection a
+    function of the torque the spring carries (`extra`)."""
 
     joint: eqx.AbstractVar[int]
     #: The parameters' robot-file keys, each `(key, field, factor from SI)`.
     keys: ClassVar[tuple[tuple[str, str, float], ...]] = ()
     law: ClassVar[str] = ""
-    #: What the potential's argument is: `"link"` (the link-side angle `q + θ`) or
-    #: `"deflection"` (`θ`).
+    #: What the law acts on: `"link"` (its potential's argument is the link-side angle
+    #: `q + θ`), `"deflection"` (`θ`) or `"torque"` (no potential: `extra`).
     acts_on: ClassVar[str] = "link"
     #: A typical size of each parameter (SI), for those whose value may be 0 ("absent").
     typical: ClassVar[dict[str, float]] = {}
     #: The parameters whose sign is physical either way (the others are magnitudes).
     signed: ClassVar[tuple[str, ...]] = ()
 
+    #: Fields that say where the law sits rather than how strong it is (a lever arm):
+    #: a discovery does not offer them as candidates.
+    geometry: ClassVar[tuple[str, ...]] = ()
+
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
         """Energy (J) at the angle `phi` (rad) it acts on."""
+        raise NotImplementedError
+
+    def extra(self, theta_lin: Float[Array, ""]) -> Float[Array, ""]:
+        """A `"torque"` law's deflection (rad) added to the joint spring's, given the
+        deflection `θ_lin = κθ·τ` (rad) the linear spring alone has under the torque."""
         raise NotImplementedError
 
 
@@ -76,6 +93,10 @@ class CompensatorLaw(SpringLaw):
         ("s0_m", "s0", 1.0),
     )
     law: ClassVar[str] = "compensator"
+    geometry: ClassVar[tuple[str, ...]] = ("lc", "l2")
+    # An absent compensator (`Kc = 0`, a discovery's candidate) moves by steps of a
+    # spring that balances 10 N·m over 0.1 m lever arms.
+    typical: ClassVar[dict[str, float]] = {"Kc": 1e3, "s0": 1e-2}
 
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
         s = compensator_length(self.lc, self.l2, phi)
@@ -106,9 +127,40 @@ class JointHardening(SpringLaw):
         return 0.25 * self.h * (phi / THETA_REF) ** 4
 
 
+#: Smallest smoothing width (rad) of `JointBacklash`'s dead band: 1 µrad.
+BACKLASH_W0 = 1e-6
+
+
+class JointBacklash(SpringLaw):
+    """Lost motion in a joint: a dead band of half-width `b` (rad; robot file `b_urad`)
+    between the drive and its spring, so that the joint moves by `b` before the spring
+    takes load. The spring's deflection under the torque τ becomes
+
+        θ = θ_lin + b·tanh(θ_lin / w),   θ_lin = κθ·τ,   w = 2·sqrt(b² + w0²)
+
+    (w0 = 1 µrad): for |θ_lin| ≫ w a joint offset `b·sign τ`, smooth in τ and in `b`
+    through 0 (so an absent backlash has a derivative). A joint whose gravity torque
+    keeps its sign shows it as a constant offset (a joint offset fits it); one whose
+    torque reverses across the poses shows the band. It acts through the joint's
+    spring: on a joint without one (κθ = 0) it does nothing. `b/w ≤ ½` keeps the
+    equilibrium's fixed-point iteration contracting."""
+
+    b: Float[Array, ""]
+    joint: int = eqx.field(static=True)
+    keys: ClassVar[tuple[tuple[str, str, float], ...]] = (("b_urad", "b", 1e6),)
+    law: ClassVar[str] = "backlash"
+    acts_on: ClassVar[str] = "torque"
+    typical: ClassVar[dict[str, float]] = {"b": 1e-4}  # 100 µrad: a worn harmonic drive
+
+    def extra(self, theta_lin: Float[Array, ""]) -> Float[Array, ""]:
+        w = 2.0 * jnp.sqrt(self.b**2 + BACKLASH_W0**2)
+        return self.b * jnp.tanh(theta_lin / w)
+
+
 SPRING_LAWS: dict[str, type[SpringLaw]] = {
     "compensator": CompensatorLaw,
     "joint_hardening": JointHardening,
+    "backlash": JointBacklash,
 }
 
 

@@ -5,13 +5,15 @@ The equilibrium minimises the total potential `U(φ) = V(q, φ) + ½ Σ φ²/κ`
 spring deflections φ (three per moving element: about z, x, y), with `V` the gravity of
 the masses, the spring laws and the work of an external force. Its stationarity
 condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
-zero (a rigid spring), and solved as the fixed point `φ = −κ ⊙ ∂V/∂φ` by optimistix
-(the springs are stiff against the load's own stiffness, so the iteration contracts
-fast); derivatives with respect to every parameter come from the implicit function
-theorem, whose linear system is solved by the same contraction
-(`_linalg/iterative.py`: a few Hessian-vector products instead of the 3r needed to
-form the matrix; on Agile Justin's 300 poses the Jacobian of a calibration step 1.8×
-faster), with no host callback in the compiled program (so it is cached).
+zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
+(`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
+`φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix (the springs are stiff against
+the load's own stiffness, so the iteration contracts fast); derivatives with respect
+to every parameter come from the implicit function theorem, whose linear system is
+solved by the same contraction (`_linalg/iterative.py`: a few Hessian-vector products
+instead of the 3r needed to form the matrix; on Agile Justin's 300 poses the Jacobian
+of a calibration step 1.8× faster), with no host callback in the compiled program (so
+it is cached).
 
 All functions handle one configuration; batch with `jax.vmap`.
 """
@@ -26,6 +28,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._linalg.iterative import implicit_solve
 from .kinematics import Rx, Ry, Rz
+from .spring_laws import SpringLaw
 from .tree import TreeRobot
 
 __all__ = [
@@ -36,6 +39,7 @@ __all__ = [
     "marker_positions",
     "gravity_potential",
     "link_angles",
+    "law_batches",
     "marker_index",
     "marker_pose",
     "potential",
@@ -180,6 +184,27 @@ def marker_pose(
     return R[el], _mv(R[el], robot.marker_at[at]) + t[el]
 
 
+def law_batches(robot: TreeRobot) -> list[tuple[SpringLaw, Array, Array]]:
+    """The robot's spring laws one batch per law class: a law of that class whose
+    parameters are `(k,)` arrays (its laws' stacked), the indices of the `k` active
+    joints they act on, and of those joints' drive springs (rows of φ). A law's
+    `potential` and `extra` are elementwise, so one call serves the batch: the traced
+    program does not grow with the number of joints that carry a law (a discovery puts
+    two on every joint)."""
+    row = {e: i for i, e in enumerate(robot.revolute)}
+    out = []
+    for cls in dict.fromkeys(type(law) for law in robot.laws):
+        laws = [law for law in robot.laws if type(law) is cls]
+        stacked = cls(
+            **{f: jnp.stack([getattr(law, f) for law in laws]) for _, f, _ in cls.keys},
+            joint=laws[0].joint,
+        )
+        joints = jnp.asarray([law.joint for law in laws], int)
+        rows = jnp.asarray([row[robot.drive[law.joint]] for law in laws], int)
+        out.append((stacked, joints, rows))
+    return out
+
+
 def potential(
     robot: TreeRobot,
     q: Float[Array, " n"],
@@ -191,14 +216,11 @@ def potential(
     the spring laws, and the work of a `force` (N, base frame) applied at marker `at`.
     (The springs' own energy is carried by the equilibrium condition.)"""
     u = gravity_potential(robot, q, phi)
-    if robot.laws:
-        link = link_angles(robot, q, phi)
-        row = {e: i for i, e in enumerate(robot.revolute)}
-        for law in robot.laws:
-            if law.acts_on == "deflection":  # the joint's own spring deflection θ
-                u = u + law.potential(phi[row[robot.drive[law.joint]], 0])
-            else:
-                u = u + law.potential(link[law.joint])
+    for law, joints, rows in law_batches(robot):
+        if law.acts_on == "deflection":  # the joint's own spring deflection θ
+            u = u + jnp.sum(law.potential(phi[rows, 0]))
+        elif law.acts_on == "link":  # ("torque" laws enter the balance: `_residual`)
+            u = u + jnp.sum(law.potential(link_angles(robot, q, phi)[joints]))
     if force is not None:
         u = u - jnp.dot(force, marker_pose(robot, q, phi, at)[1])
     return u
@@ -240,7 +262,11 @@ def _residual(phi, args):
             axis=-1,
         )
         grad = grad - omega @ moment
-    return phi + compliance * grad
+    res = phi + compliance * grad
+    for law, _, rows in law_batches(robot):
+        if law.acts_on == "torque":  # lost motion: θ = κθ·τ + extra(κθ·τ)
+            res = res.at[rows, 0].add(-law.extra(-compliance[rows, 0] * grad[rows, 0]))
+    return res
 
 
 def _step(phi, args):

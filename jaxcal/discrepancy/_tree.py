@@ -9,8 +9,9 @@ family at a time.
    fit, per place: the two lateral springs of one joint (link bending at its root), the
    joint spring of one joint, the geometric errors of one joint, one point mass, the
    measurement frame, one marker's offset, one spring law's constants, and where spring
-   laws are candidates a joint-stiffness nonlinearity of every joint (`candidate_robot`
-   puts an absent `JointHardening` law on each). They apply to any robot file: a family
+   laws are candidates a joint-stiffness nonlinearity and backlash of every joint and a
+   gravity compensator on the joints asked for (`candidate_robot` puts absent laws
+   there). They apply to any robot file: a family
    is a set of entries of the robot's parameter table (`_tree_candidates.py`).
 3. **Greedy forward selection** on the model linearised at the current fit: the
    candidate whose columns, orthogonalised against the fitted ones, take the largest
@@ -217,6 +218,7 @@ def discover_tree(
     *,
     candidates: tuple[TreeCandidate, ...] | None = None,
     groups: tuple[str, ...] | None = None,
+    compensators: tuple[str, ...] = (),
     rounds: int = 3,
     max_steps: int = 300,
     discriminate: int = 0,
@@ -229,8 +231,8 @@ def discover_tree(
 
     `candidates`: the families to try (default: `tree_candidates` of the parameter
     `groups`, default those of the full calibration, masses and spring laws; where spring
-    laws are candidates, a joint-stiffness nonlinearity on every joint too:
-    `candidate_robot`);
+    laws are candidates, a joint-stiffness nonlinearity and backlash on every joint too,
+    and a gravity compensator on each joint named in `compensators`: `candidate_robot`);
     `rounds`: how many times the search looks again after a nonlinear refit.
     `discriminate`: where a named family's runner-up fits about as well, choose that
     many poses of `pool` (default random poses within the limits, drawn by `seed`) that
@@ -252,9 +254,13 @@ def discover_tree(
     if candidates is None:
         look = (*default_groups(robot), "masses", "spring-laws") if groups is None else groups
         if "spring-laws" in look and "spring-laws" not in nominal:
-            robot = candidate_robot(robot)
+            robot = candidate_robot(robot, tuple(compensators))
+        elif compensators:
+            raise ValueError("compensators: spring laws are not among the candidate groups")
         cands = tree_candidates(robot, nominal, look)
     else:
+        if compensators:
+            raise ValueError("compensators: give them with the default candidates only")
         cands = tuple(candidates)
     if not cands:
         raise ValueError("no candidates to test")

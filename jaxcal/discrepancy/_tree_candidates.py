@@ -1,6 +1,12 @@
 """The candidate families of `discover_tree`: the parameter families a calibration
 does not fit, one per place, for any robot given as a kinematic tree, and the robot
-with a joint-stiffness nonlinearity on every joint for the spring-law candidates."""
+with a joint-stiffness nonlinearity and backlash on every joint (and a compensator on
+the joints asked for) for the spring-law candidates.
+
+A tool compliance (the tool turning on the flange under a wrench at the tool) is no
+candidate here: absolute measurements under the robot's own weight load nothing beyond
+the last element but its masses, and under those it is the last element's own
+springs, which are candidates."""
 
 from __future__ import annotations
 
@@ -16,11 +22,16 @@ from .._identification.parameter_groups import (
     default_groups,
     parameter_table,
 )
-from .._model.spring_laws import JointHardening
+from .._model.spring_laws import CompensatorLaw, JointBacklash, JointHardening
 from .._model.tree import TreeRobot
 from ._tree_report import TreeCandidate
 
-__all__ = ["tree_candidates", "candidate_robot", "positive_parameters"]
+__all__ = ["tree_candidates", "candidate_robot", "positive_parameters", "COMPENSATOR_ARMS"]
+
+#: Lever arms `(lc, l2)` (m) of a candidate compensator (`candidate_robot`): only
+#: `Kc·lc·l2` matters while its free length is 0; unequal, so that the spring's length
+#: never reaches 0 (where it has no derivative).
+COMPENSATOR_ARMS = (0.1, 0.2)
 
 
 def _owner(robot: TreeRobot, p: Parameter) -> str:
@@ -41,18 +52,35 @@ def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.nd
     return out
 
 
-def candidate_robot(robot: TreeRobot) -> TreeRobot:
-    """`robot` with an absent (`h = 0`) `JointHardening` law on every revolute joint
-    that has a joint spring and none yet: the joint-stiffness nonlinearity as a
-    candidate of every such joint (a spring law's parameters are candidates of the
-    `spring-laws` group)."""
-    have = {law.joint for law in robot.laws if isinstance(law, JointHardening)}
-    new = tuple(
-        JointHardening(h=jnp.zeros((), robot.world.dtype), joint=j)
-        for j, e in enumerate(robot.drive)
-        if j not in have and robot.springs[e][0] and not robot.sliding[e]
-    )
-    return dataclasses.replace(robot, laws=robot.laws + new) if new else robot
+def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> TreeRobot:
+    """`robot` with the absent laws a discovery tries, as candidates of the
+    `spring-laws` group: a joint-stiffness nonlinearity (`JointHardening`, `h = 0`) and
+    lost motion (`JointBacklash`, `b = 0`) on every revolute joint that has a joint
+    spring and no such law yet, and a gravity compensator (`CompensatorLaw`, `Kc = 0`)
+    on each joint named in `compensators`: a zero-free-length spring across the lever
+    arms `COMPENSATOR_ARMS`, aligned at the joint's zero, whose torque `Kc·lc·l2·sin φ`
+    balances a link's weight (write the law into the robot file, with `Kc` 0, for
+    another geometry)."""
+    unknown = [j for j in compensators if j not in robot.joint_names]
+    if unknown:
+        raise ValueError(
+            f"compensators: no joint(s) {unknown}; the robot has {list(robot.joint_names)}"
+        )
+    zero = jnp.zeros((), robot.world.dtype)
+    new: list = []
+    for cls in (JointHardening, JointBacklash):
+        have = {law.joint for law in robot.laws if isinstance(law, cls)}
+        new += [
+            cls(**{cls.keys[0][1]: zero}, joint=j)
+            for j, e in enumerate(robot.drive)
+            if j not in have and robot.springs[e][0] and not robot.sliding[e]
+        ]
+    lc, l2 = (jnp.asarray(x, robot.world.dtype) for x in COMPENSATOR_ARMS)
+    new += [
+        CompensatorLaw(lc=lc, l2=l2, Kc=zero, s0=zero, joint=robot.joint_names.index(j))
+        for j in dict.fromkeys(compensators)
+    ]
+    return dataclasses.replace(robot, laws=robot.laws + tuple(new)) if new else robot
 
 
 def tree_candidates(
@@ -68,5 +96,9 @@ def tree_candidates(
         raise ValueError(f"unknown parameter group(s) {unknown}; known: {', '.join(GROUPS)}")
     out: dict[tuple[str, str], list[str]] = {}
     for p in parameter_table(robot, tuple(g for g in groups if g not in nominal)):
+        if p.group == "spring-laws":  # a law's lever arms say where it is, not what
+            _, law, field = p.field.split(".")
+            if field in robot.laws[int(law)].geometry:
+                continue
         out.setdefault((p.group, _owner(robot, p)), []).append(p.name)
     return tuple(TreeCandidate(g, at, tuple(names)) for (g, at), names in out.items())
