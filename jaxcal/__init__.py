@@ -143,6 +143,8 @@ from ._model.simulate import (
 from ._model.spring_laws import (
     SPRING_LAWS as SPRING_LAWS,
     CompensatorLaw as CompensatorLaw,
+    JointBacklash as JointBacklash,
+    JointHardening as JointHardening,
     SpringLaw as SpringLaw,
 )
 from ._model.tree import (
