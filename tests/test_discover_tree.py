@@ -177,6 +177,22 @@ def test_hidden_spring_law_is_named_and_sized(hidden):
         assert not found.warnings()
 
 
+def test_a_compensator_needs_a_revolute_joint():
+    # Its law is written for an angle: a prismatic joint is refused by name before any fit.
+    d = jaxcal.tree_to_dict(_pendulum(2e-6, None))
+    d["joints"][0] = {"name": "q1", "limits_m": [-0.5, 0.5]}
+    d["elements"][0] |= {"type": "prismatic", "axial_compliance_um_per_N": 0.01}
+    d["elements"][0].pop("compliance_urad_per_Nm")
+    slide = jaxcal.tree_from_dict(d)
+    q = np.linspace(-0.4, 0.4, 4)[:, None]
+    plan = jaxcal.MarkerData(q=q, markers=None, seen=np.ones((4, 1), bool), sigma=np.full(4, 1e-5))
+    data = jaxcal.MarkerData(
+        q=q, markers=jaxcal.predicted_markers(slide, plan)[0], seen=plan.seen, sigma=plan.sigma
+    )
+    with pytest.raises(ValueError, match=r"compensators: joint\(s\) \['q1'\] are prismatic"):
+        jaxcal.discover_tree(slide, data, ("frames",), compensators=("q1",))
+
+
 def test_cli_any_robot_file(tmp_path, capsys):
     # A user's own robot file and marker data, as the command line takes them: the
     # hardening is named in the table and in --json, and with nothing ambiguous no poses

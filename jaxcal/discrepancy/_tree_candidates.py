@@ -66,6 +66,10 @@ def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> Tre
         raise ValueError(
             f"compensators: no joint(s) {unknown}; the robot has {list(robot.joint_names)}"
         )
+    # Its law is written for an angle.
+    sliding = [j for j in compensators if robot.joint_prismatic[robot.joint_names.index(j)]]
+    if sliding:
+        raise ValueError(f"compensators: joint(s) {sliding} are prismatic, a compensator turns")
     zero = jnp.zeros((), robot.world.dtype)
     new: list = []
     for cls in (JointHardening, JointBacklash):
