@@ -191,6 +191,12 @@ def test_a_compensator_needs_a_revolute_joint():
     )
     with pytest.raises(ValueError, match=r"compensators: joint\(s\) \['q1'\] are prismatic"):
         jaxcal.discover_tree(slide, data, ("frames",), compensators=("q1",))
+    # A law the robot file already has on that joint is a candidate already.
+    file_law = _pendulum(2e-6, None, [HIDDEN_LAWS["compensator"][0] | {"Kc_N_per_m": 0.0}])
+    with pytest.raises(ValueError, match=r"\['q1'\] have a compensator in the robot file"):
+        jaxcal.discover_tree(file_law, data, ("frames",), compensators=("q1",))
+    with pytest.raises(ValueError, match="compensators must be a tuple of joint names"):
+        jaxcal.discover_tree(file_law, data, ("frames",), compensators="q1")
 
 
 def test_cli_any_robot_file(tmp_path, capsys):
@@ -330,4 +336,6 @@ def test_tree_options_are_for_tree_robots(capsys):
     assert main([*args, "--compensator-at", "right_9"]) == 2
     assert "--compensator-at: no joint(s) ['right_9']" in capsys.readouterr().err
     assert main([*args, "--candidates", "masses", "--compensator-at", "right_2"]) == 2
-    assert "--compensator-at: spring laws are not" in capsys.readouterr().err
+    assert "--compensator-at: spring laws are not among the --candidates" in capsys.readouterr().err
+    assert main([*args, "--compensator-at", " , "]) == 2
+    assert "--compensator-at: names no joint" in capsys.readouterr().err

@@ -111,9 +111,12 @@ def run_tree(args: argparse.Namespace) -> int:
         else parse_groups(args.candidates, robot)
     )
     compensators = tuple(j.strip() for j in (args.compensator_at or "").split(",") if j.strip())
+    if args.compensator_at is not None and not compensators:
+        raise ValueError("--compensator-at: names no joint")
     with_laws = "spring-laws" in look and "spring-laws" not in nominal
     if compensators and not with_laws:
-        raise ValueError("--compensator-at: spring laws are not among the --candidates")
+        why = "fitted by --params" if "spring-laws" in nominal else "not among the --candidates"
+        raise ValueError(f"--compensator-at: spring laws are {why}")
     try:
         cand_robot = candidate_robot(robot, compensators) if with_laws else robot
     except ValueError as e:

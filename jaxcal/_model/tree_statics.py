@@ -20,6 +20,8 @@ All functions handle one configuration; batch with `jax.vmap`.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -195,9 +197,9 @@ def law_batches(robot: TreeRobot) -> list[tuple[SpringLaw, Array, Array]]:
     out = []
     for cls in dict.fromkeys(type(law) for law in robot.laws):
         laws = [law for law in robot.laws if type(law) is cls]
-        stacked = cls(
-            **{f: jnp.stack([getattr(law, f) for law in laws]) for _, f, _ in cls.keys},
-            joint=laws[0].joint,
+        arrays = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("static")]
+        stacked = dataclasses.replace(
+            laws[0], **{f: jnp.stack([getattr(law, f) for law in laws]) for f in arrays}
         )
         joints = jnp.asarray([law.joint for law in laws], int)
         rows = jnp.asarray([row[robot.drive[law.joint]] for law in laws], int)
@@ -219,8 +221,10 @@ def potential(
     for law, joints, rows in law_batches(robot):
         if law.acts_on == "deflection":  # the joint's own spring deflection θ
             u = u + jnp.sum(law.potential(phi[rows, 0]))
-        elif law.acts_on == "link":  # ("torque" laws enter the balance: `_residual`)
+        elif law.acts_on == "link":
             u = u + jnp.sum(law.potential(link_angles(robot, q, phi)[joints]))
+        elif law.acts_on != "torque":  # (those enter the balance: `_residual`)
+            raise ValueError(f"spring law {law.law!r}: unknown acts_on {law.acts_on!r}")
     if force is not None:
         u = u - jnp.dot(force, marker_pose(robot, q, phi, at)[1])
     return u
@@ -235,11 +239,12 @@ class TreeEquilibrium(eqx.Module):
 
 
 #: Relative accuracy of the implicit derivative's solve: the iteration stops once a step
-#: changes the derivative by this fraction, which leaves an error of ρ/(1 − ρ) times
-#: that (ρ ≈ 0.05–0.08, the contraction on Agile Justin), 1e-9. A fit's Jacobian and its
-#: covariance need far less than the equilibrium's own 1e-12: on Justin's 300 poses
-#: the full calibration takes the same steps to the same χ² (to 1e-12 relative) as at
-#: 1e-10, each step 15–20 % faster.
+#: changes the derivative by this fraction of the right-hand side's norm, which leaves
+#: an error of ρ/(1 − ρ) times that (ρ ≈ 0.05–0.08, the contraction on Agile Justin's
+#: poses), ~1e-9. A fit's Jacobian and its covariance need far less than the
+#: equilibrium's own 1e-12: Justin's full calibration reaches the same χ² (to 1e-12
+#: relative) in the same steps as with a 100 times tighter solve, each step 15–20 %
+#: faster.
 _ADJOINT_RTOL = 1e-8
 
 

@@ -254,9 +254,10 @@ def discover_tree(
     if candidates is None:
         look = (*default_groups(robot), "masses", "spring-laws") if groups is None else groups
         if "spring-laws" in look and "spring-laws" not in nominal:
-            robot = candidate_robot(robot, tuple(compensators))
+            robot = candidate_robot(robot, compensators)
         elif compensators:
-            raise ValueError("compensators: spring laws are not among the candidate groups")
+            why = "in nominal" if "spring-laws" in nominal else "not among the candidate groups"
+            raise ValueError(f"compensators: spring laws are {why}")
         cands = tree_candidates(robot, nominal, look)
     else:
         if compensators:

@@ -55,12 +55,15 @@ def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.nd
 def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> TreeRobot:
     """`robot` with the absent laws a discovery tries, as candidates of the
     `spring-laws` group: a joint-stiffness nonlinearity (`JointHardening`, `h = 0`) and
-    lost motion (`JointBacklash`, `b = 0`) on every revolute joint that has a joint
-    spring and no such law yet, and a gravity compensator (`CompensatorLaw`, `Kc = 0`)
-    on each joint named in `compensators`: a zero-free-length spring across the lever
-    arms `COMPENSATOR_ARMS`, aligned at the joint's zero, whose torque `Kc·lc·l2·sin φ`
-    balances a link's weight (write the law into the robot file, with `Kc` 0, for
-    another geometry)."""
+    lost motion (`JointBacklash`, `b = 0`) on every revolute joint that has no such law
+    yet (one whose κθ is 0 sees none of them), and a gravity compensator
+    (`CompensatorLaw`, `Kc = 0`) on each joint named in `compensators`: a
+    zero-free-length spring across the lever arms `COMPENSATOR_ARMS`, aligned at the
+    joint's zero, whose torque `Kc·lc·l2·sin φ` balances a link's weight (write the law
+    into the robot file, with `Kc` 0, for another geometry)."""
+    if isinstance(compensators, str):
+        raise ValueError(f"compensators must be a tuple of joint names, got {compensators!r}")
+    compensators = tuple(compensators)
     unknown = [j for j in compensators if j not in robot.joint_names]
     if unknown:
         raise ValueError(
@@ -70,6 +73,10 @@ def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> Tre
     sliding = [j for j in compensators if robot.joint_prismatic[robot.joint_names.index(j)]]
     if sliding:
         raise ValueError(f"compensators: joint(s) {sliding} are prismatic, a compensator turns")
+    have = {law.joint for law in robot.laws if isinstance(law, CompensatorLaw)}
+    twice = [j for j in compensators if robot.joint_names.index(j) in have]
+    if twice:
+        raise ValueError(f"compensators: joint(s) {twice} have a compensator in the robot file")
     zero = jnp.zeros((), robot.world.dtype)
     new: list = []
     for cls in (JointHardening, JointBacklash):
