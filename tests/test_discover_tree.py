@@ -71,6 +71,32 @@ def _pendulum(kappa: float, h: float | None, laws: list | None = None):
 
 
 PEND_M, PEND_L = 50.0, 1.2  # kg, m
+#: The pendulum swung through a full turn, 36 poses (rad).
+FULL_TURN = np.linspace(-np.pi, np.pi, 37)[:-1, None]
+
+
+def _check_law_derivative(robot, q: float, field: str, x: float, dx: float, rel: float):
+    """∂θ/∂(field of the robot's first law) at `x`, by the implicit function theorem,
+    against central differences of step `dx`."""
+
+    def theta_of(v):
+        r = eqx.tree_at(lambda r: getattr(r.laws[0], field), robot, v)
+        return jaxcal.tree_equilibrium(r, jnp.array([q])).phi[0, 0]
+
+    fd = (theta_of(jnp.asarray(x + dx)) - theta_of(jnp.asarray(x - dx))) / (2 * dx)
+    assert float(jax.grad(theta_of)(jnp.asarray(x))) == pytest.approx(float(fd), rel=rel)
+
+
+def _measured(truth, q: np.ndarray, sigma: float, seed: int | None = 5):
+    """Marker data of `truth` at the poses `q` (rad) with σ `sigma` (m): its predictions
+    plus noise drawn by `seed`, or exact (`None`)."""
+    n = len(q)
+    plan = jaxcal.MarkerData(q=q, markers=None, seen=np.ones((n, 1), bool), sigma=np.full(n, sigma))
+    y, ok = jaxcal.predicted_markers(truth, plan)
+    assert ok.all()
+    if seed is not None:
+        y = y + np.random.default_rng(seed).normal(size=y.shape) * sigma
+    return jaxcal.MarkerData(q=q, markers=y, seen=plan.seen, sigma=plan.sigma)
 
 
 @pytest.mark.parametrize("q", [0.0, 0.5, -1.0])
@@ -92,13 +118,7 @@ def test_joint_hardening_against_the_analytic_pendulum(q):
     rigid = jaxcal.tree_equilibrium(_pendulum(kappa, 0.0), jnp.array([q]))
     assert abs(float(eq.phi[0, 0] - rigid.phi[0, 0])) > 0.01 * abs(theta)
 
-    def theta_of(hh):
-        r = eqx.tree_at(lambda r: r.laws[0].h, robot, hh)
-        return jaxcal.tree_equilibrium(r, jnp.array([q])).phi[0, 0]
-
-    dh = 1e-4
-    fd = (theta_of(jnp.asarray(h + dh)) - theta_of(jnp.asarray(h - dh))) / (2 * dh)
-    assert float(jax.grad(theta_of)(jnp.asarray(h))) == pytest.approx(float(fd), rel=1e-6)
+    _check_law_derivative(robot, q, "h", h, 1e-4, rel=1e-6)
 
 
 @pytest.mark.parametrize("q", [0.0, -1.0, np.pi / 2 + 1e-4])
@@ -119,13 +139,7 @@ def test_backlash_against_the_analytic_pendulum(q):
     theta = scipy.optimize.brentq(balance, -0.1, 0.1, xtol=1e-17)
     assert float(eq.phi[0, 0]) == pytest.approx(theta, rel=1e-8, abs=1e-15)
 
-    def theta_of(bb):
-        r = eqx.tree_at(lambda r: r.laws[0].b, robot, bb)
-        return jaxcal.tree_equilibrium(r, jnp.array([q])).phi[0, 0]
-
-    db = 1e-7
-    fd = (theta_of(jnp.asarray(b + db)) - theta_of(jnp.asarray(b - db))) / (2 * db)
-    assert float(jax.grad(theta_of)(jnp.asarray(b))) == pytest.approx(float(fd), rel=1e-5)
+    _check_law_derivative(robot, q, "b", b, 1e-7, rel=1e-5)
 
 
 #: Hidden spring laws of the simulated pendulum, each with the parameter it is sized by
@@ -154,14 +168,7 @@ def test_hidden_spring_law_is_named_and_sized(hidden):
     kappa = 2e-6
     law, key, unit = HIDDEN_LAWS[hidden] if hidden else ({}, "", "")
     truth = _pendulum(kappa, None, [law] if law else [])
-    q = np.linspace(-np.pi, np.pi, 37)[:-1, None]
-    plan = jaxcal.MarkerData(
-        q=q, markers=None, seen=np.ones((36, 1), bool), sigma=np.full(36, sigma)
-    )
-    y, ok = jaxcal.predicted_markers(truth, plan)
-    assert ok.all()
-    noisy = y + np.random.default_rng(5).normal(size=y.shape) * sigma
-    data = jaxcal.MarkerData(q=q, markers=noisy, seen=plan.seen, sigma=plan.sigma)
+    data = _measured(truth, FULL_TURN, sigma)
     nominal = _pendulum(kappa * 1.3, None)  # the file's spring 30 % off, no law
     found = jaxcal.discover_tree(
         nominal, data, ("frames", "joint-compliance"), groups=("spring-laws",), compensators=("q1",)
@@ -184,11 +191,7 @@ def test_a_compensator_needs_a_revolute_joint():
     d["elements"][0] |= {"type": "prismatic", "axial_compliance_um_per_N": 0.01}
     d["elements"][0].pop("compliance_urad_per_Nm")
     slide = jaxcal.tree_from_dict(d)
-    q = np.linspace(-0.4, 0.4, 4)[:, None]
-    plan = jaxcal.MarkerData(q=q, markers=None, seen=np.ones((4, 1), bool), sigma=np.full(4, 1e-5))
-    data = jaxcal.MarkerData(
-        q=q, markers=jaxcal.predicted_markers(slide, plan)[0], seen=plan.seen, sigma=plan.sigma
-    )
+    data = _measured(slide, np.linspace(-0.4, 0.4, 4)[:, None], 1e-5, seed=None)
     with pytest.raises(ValueError, match=r"compensators: joint\(s\) \['q1'\] are prismatic"):
         jaxcal.discover_tree(slide, data, ("frames",), compensators=("q1",))
     # A law the robot file already has on that joint is a candidate already.
@@ -207,14 +210,9 @@ def test_cli_any_robot_file(tmp_path, capsys):
     robot_file = tmp_path / "pendulum.json"
     robot_file.write_text(json.dumps(jaxcal.tree_to_dict(_pendulum(kappa * 1.3, None))))
     truth = _pendulum(kappa, h)
-    q = np.linspace(-np.pi, np.pi, 37)[:-1, None]
-    plan = jaxcal.MarkerData(
-        q=q, markers=None, seen=np.ones((36, 1), bool), sigma=np.full(36, sigma)
-    )
-    y, _ = jaxcal.predicted_markers(truth, plan)
-    noisy = y + np.random.default_rng(5).normal(size=y.shape) * sigma
+    data = _measured(truth, FULL_TURN, sigma)
     data_file = tmp_path / "data.csv"
-    jaxcal.write_markers(data_file, plan, truth, noisy)
+    jaxcal.write_markers(data_file, data, truth, data.markers)
     args = ["discover", str(data_file), "--robot", str(robot_file)]
     args += ["--params", "frames,joint-compliance", "--candidates", "spring-laws"]
     args += ["--compensator-at", "q1"]
