@@ -24,7 +24,7 @@ from jaxtyping import Array, Bool, Float
 from ._io import DataError, atomic_file, finite_number, read_rows
 from ._model.tree import TreeRobot
 
-__all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns"]
+__all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns", "random_plan"]
 
 _MAX_REPORTED = 25
 #: A marker coordinate (or a noise) beyond this, mm, is no measurement: a laser tracker
@@ -65,6 +65,16 @@ class MarkerData(eqx.Module):
             ids=ids,
             source=self.source,
         )
+
+
+def random_plan(robot: TreeRobot, n: int, sigma: float, seed: int = 0) -> MarkerData:
+    """A plan of `n` poses drawn uniformly within the joint limits by `seed`, every marker
+    to be measured with σ `sigma` (m): the candidate poses of the designs that propose
+    new measurements (check that the instrument sees them)."""
+    lo, hi = np.asarray(robot.joint_limits, float).T
+    q = np.random.default_rng(seed).uniform(lo, hi, (n, len(lo)))
+    k = len(robot.marker_names)
+    return MarkerData(q=q, markers=None, seen=np.ones((n, k), bool), sigma=np.full(n, sigma))
 
 
 def marker_columns(robot: TreeRobot) -> tuple[tuple[str, ...], tuple[str, ...]]:

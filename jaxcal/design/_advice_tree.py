@@ -26,7 +26,7 @@ import numpy as np
 from .._identification.elastogeometric import TreeCalibration, scaled_jacobian
 from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
-from .._markers import MarkerData
+from .._markers import MarkerData, random_plan
 from ._advice import Advice
 
 __all__ = ["advise_tree"]
@@ -110,10 +110,8 @@ def advise_tree(
     sig = float(np.median(np.asarray(data.sigma))) if sigma is None else float(sigma)
 
     robot = cal.robot
-    lo, hi = np.asarray(robot.joint_limits, float).T
-    qc = np.random.default_rng(seed).uniform(lo, hi, (pool, len(lo)))
     k = len(robot.marker_names)
-    plan = MarkerData(q=qc, markers=None, seen=np.ones((pool, k), bool), sigma=np.full(pool, sig))
+    plan = random_plan(robot, pool, sig, seed)
     Ac = scaled_jacobian(robot, cal.table, plan)[..., cols].reshape(pool, 3 * k, len(cols))
     C = _fitted_covariance(cal, cols, scale)
     if C is None:
@@ -148,7 +146,7 @@ def advise_tree(
     order = chosen[np.argsort(-counts[chosen], kind="stable")]
     return Advice(
         targets=targets,
-        q=qc[order],
+        q=np.asarray(plan.q)[order],
         force=np.zeros((len(order), 3)),
         rows=counts[order],
         before=dict(zip(targets, before.tolist(), strict=True)),

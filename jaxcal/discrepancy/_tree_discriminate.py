@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._identification.elastogeometric import TreeCalibration, scaled_jacobian
-from .._markers import MarkerData
+from .._markers import MarkerData, random_plan
 
 __all__ = ["TreeDiscrimination", "tree_pool", "discriminate_tree"]
 
@@ -42,11 +42,7 @@ class TreeDiscrimination(NamedTuple):
 
 def tree_pool(cal: TreeCalibration, data: MarkerData, n: int = 300, seed: int = 0) -> MarkerData:
     """`n` random poses within the joint limits, every marker seen, σ the data's median."""
-    lo, hi = np.asarray(cal.robot.joint_limits, float).T
-    q = np.random.default_rng(seed).uniform(lo, hi, (n, len(lo)))
-    k = len(cal.robot.marker_names)
-    sig = float(np.median(np.asarray(data.sigma)))
-    return MarkerData(q=q, markers=None, seen=np.ones((n, k), bool), sigma=np.full(n, sig))
+    return random_plan(cal.robot, n, float(np.median(np.asarray(data.sigma))), seed)
 
 
 def discriminate_tree(
