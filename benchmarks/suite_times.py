@@ -1,0 +1,81 @@
+"""Where the test suite's time goes: XLA compile, tracing and lowering per test, from
+JAX's own duration events (`jax.monitoring`), the rest being run time.
+
+A pytest plugin. Run: `PYTHONPATH=benchmarks .venv/bin/python -m pytest -p suite_times`
+(any pytest arguments; the xdist workers load it too). Each process writes
+`suite-times-<worker>.json` in `$SUITE_TIMES_DIR` (default: the current directory), and
+`python benchmarks/suite_times.py [DIR]` prints the totals, the files and the tests
+that take longest. Subprocesses (notebook kernels, the command line run as a process)
+are counted as run time of their test.
+"""
+
+from __future__ import annotations
+
+import collections
+import glob
+import json
+import os
+import sys
+import time
+
+import pytest
+
+_EVENTS = {
+    "/jax/core/compile/backend_compile_duration": "compile",
+    "/jax/core/compile/jaxpr_trace_duration": "trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+}
+_current = ["<outside tests>"]
+_times: dict = collections.defaultdict(lambda: collections.defaultdict(float))
+
+
+def _listener(event: str, duration: float, **_) -> None:
+    if event in _EVENTS:
+        _times[_current[0]][_EVENTS[event]] += duration
+
+
+def pytest_configure(config):
+    import jax.monitoring
+
+    jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    _current[0] = item.nodeid
+    t0 = time.perf_counter()
+    yield
+    _times[item.nodeid]["wall"] += time.perf_counter() - t0
+
+
+def pytest_sessionfinish(session):
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    out = os.path.join(os.environ.get("SUITE_TIMES_DIR", "."), f"suite-times-{worker}.json")
+    with open(out, "w") as f:
+        json.dump({k: dict(v) for k, v in _times.items()}, f)
+
+
+def _report(directory: str) -> None:
+    tests: dict = {}
+    for path in glob.glob(os.path.join(directory, "suite-times-*.json")):
+        with open(path) as f:
+            tests.update(json.load(f))
+    files: dict = collections.defaultdict(collections.Counter)
+    for name, t in tests.items():
+        files[name.split("::")[0]].update(t)
+    kinds = ("compile", "trace", "lower")
+
+    def line(label, t):
+        rest = t.get("wall", 0.0) - sum(t.get(k, 0.0) for k in kinds)
+        parts = "  ".join(f"{k} {t.get(k, 0.0):6.1f}" for k in kinds)
+        return f"{t.get('wall', 0.0):7.1f} s  {parts}  rest {rest:6.1f}  {label}"
+
+    print(line("all tests", sum(files.values(), collections.Counter())))
+    for label, group in (("files", files), ("tests", tests)):
+        print(f"\nslowest {label}:")
+        for name, t in sorted(group.items(), key=lambda kv: -kv[1].get("wall", 0.0))[:15]:
+            print(line(name, t))
+
+
+if __name__ == "__main__":
+    _report(sys.argv[1] if len(sys.argv) > 1 else ".")
