@@ -200,6 +200,11 @@ def test_a_compensator_needs_a_revolute_joint():
         jaxcal.discover_tree(file_law, data, ("frames",), compensators=("q1",))
     with pytest.raises(ValueError, match="compensators must be a tuple of joint names"):
         jaxcal.discover_tree(file_law, data, ("frames",), compensators="q1")
+    # Nor may a robot file put an angle law on it (it would be applied in m).
+    for law in HIDDEN_LAWS.values():
+        d["spring_laws"] = [law[0]]
+        with pytest.raises(ValueError, match=rf"{law[0]['law']}' on joint 'q1': the joint is pris"):
+            jaxcal.tree_from_dict(d)
 
 
 def test_cli_any_robot_file(tmp_path, capsys):

@@ -67,6 +67,10 @@ class SpringLaw(eqx.Module):
     #: Fields that say where the law sits rather than how strong it is (a lever arm):
     #: a discovery does not offer them as candidates.
     geometry: ClassVar[tuple[str, ...]] = ()
+    #: Whether the law is written for a turning joint (its argument an angle in rad, its
+    #: parameters in rad or J per angle): a robot refuses it on a sliding joint, whose
+    #: values are in m.
+    turns: ClassVar[bool] = True
 
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
         """Energy (J) at the angle `phi` (rad) it acts on."""

@@ -165,6 +165,11 @@ class TreeRobot(eqx.Module):
         for law in self.laws:
             if not 0 <= law.joint < n:
                 raise ValueError(f"spring law on joint {law.joint} of {n}")
+            if law.turns and self.joint_prismatic[law.joint]:
+                raise ValueError(
+                    f"spring law {law.law!r} on joint {self.joint_names[law.joint]!r}: the "
+                    "joint is prismatic, the law is written for an angle"
+                )
         for i, p in enumerate(self.parents):
             if not -1 <= p < i:
                 raise ValueError(
