@@ -84,7 +84,7 @@ def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> Tre
         new += [
             cls(**{cls.keys[0][1]: zero}, joint=j)
             for j, e in enumerate(robot.drive)
-            if j not in have and robot.springs[e][0] and not robot.sliding[e]
+            if j not in have and robot.springs[e][0] and not (cls.turns and robot.sliding[e])
         ]
     lc, l2 = (jnp.asarray(x, robot.world.dtype) for x in COMPENSATOR_ARMS)
     new += [
