@@ -238,15 +238,14 @@ class TreeEquilibrium(eqx.Module):
     converged: Bool[Array, ""]
 
 
-#: Relative accuracy of the implicit derivative's solve: the iteration stops once a step
-#: changes the derivative by this fraction of the right-hand side's norm, which leaves
-#: an error of ρ/(1 − ρ) times that (ρ ≈ 0.05–0.08, the contraction on Agile Justin's
-#: poses), ~1e-7 relative. A fit needs far less: its Levenberg–Marquardt steps and
-#: covariance are statistical quantities (relative stds of 1e-3 and more), and the
-#: equilibrium itself, whose residual the fit minimises, is solved to 1e-12. Justin's
-#: full calibration takes the same 21 steps to the same χ² (to 3e-12 relative) as with
-#: a solve 100 or 10⁴ times tighter, each step about 20 % faster than at 1e-8.
-_ADJOINT_RTOL = 1e-6
+#: Relative accuracy of the implicit derivative's solve, by default: the iteration stops
+#: once a step changes the derivative by this fraction of the right-hand side's norm,
+#: which leaves an error of ρ/(1 − ρ) times that (ρ ≈ 0.05–0.08, the contraction on Agile
+#: Justin's poses; more near a compensator), ~1e-7 relative. Each further factor of 10
+#: costs one more product with the equilibrium's Hessian per output, the largest part of
+#: a derivative's cost. `derivative_rtol` sets it per call: a fit's Jacobian needs less
+#: (see `_identification/elastogeometric.py`).
+DERIVATIVE_RTOL = 1e-6
 
 
 # Traced once per robot structure and argument shapes, then reused: the residual (the
@@ -303,14 +302,17 @@ def tree_equilibrium(
     moment: Float[Array, 3] | None = None,
     at: int | str = 0,
     max_steps: int = 32,
+    derivative_rtol: float = DERIVATIVE_RTOL,
 ) -> TreeEquilibrium:
     """The spring deflections at which gravity, the spring laws, an optional external
     wrench (`force` N and `moment` N·m in the base frame, applied at marker `at`) and
     the springs balance, at commanded angles `q` (rad). Differentiable in every array
-    field of `robot` by the implicit function theorem; never raises for values (check
-    `converged`)."""
+    field of `robot` by the implicit function theorem, to `derivative_rtol` relative
+    (see `DERIVATIVE_RTOL`); never raises for values (check `converged`)."""
     at = _check_load(robot, q, force, moment, at)
-    phi = _fixed_point(robot, q, force, moment, at=at, max_steps=max_steps)
+    phi = _fixed_point(
+        robot, q, force, moment, at=at, max_steps=max_steps, derivative_rtol=derivative_rtol
+    )
     # Converged: one more step moves φ by at most the iteration's own tolerance (10×:
     # the solver stopped on the previous step's change, this is the next one's).
     tol = 10.0 * _tolerance(q.dtype)
@@ -324,7 +326,7 @@ def _tolerance(dtype) -> float:
 
 
 @eqx.filter_custom_jvp
-def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int):
+def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative_rtol: float):
     args = (robot, q, force, moment, at)
     tol = _tolerance(q.dtype)
     phi0 = jnp.zeros((len(robot.revolute), 3), q.dtype)
@@ -343,9 +345,9 @@ def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int):
 
 
 @_fixed_point.def_jvp
-def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int):
+def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int, derivative_rtol: float):
     # Implicit function theorem on φ = g(φ, θ): (I − ∂g/∂φ) φ̇ = ∂g/∂θ θ̇.
-    phi = _fixed_point(*primals, at=at, max_steps=max_steps)
+    phi = _fixed_point(*primals, at=at, max_steps=max_steps, derivative_rtol=derivative_rtol)
     robot, q, force, moment = primals
     args = (robot, q, force, moment, at)
     zero = lambda t, p: jnp.zeros_like(p) if t is None and eqx.is_inexact_array(p) else t
@@ -357,7 +359,7 @@ def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int):
         lambda v: jax.jvp(g, (phi,), (v,))[1],
         lambda v: vjp(v)[0],
         b,
-        rtol=_ADJOINT_RTOL,
+        rtol=derivative_rtol,
     )
     return phi, t_phi
 
@@ -384,9 +386,10 @@ def tree_deflection(
 
 @eqx.filter_jit
 def predict_markers(
-    robot: TreeRobot, q: Float[Array, " n"]
+    robot: TreeRobot, q: Float[Array, " n"], *, derivative_rtol: float = DERIVATIVE_RTOL
 ) -> tuple[Float[Array, "k 3"], Bool[Array, ""]]:
     """Marker positions (m, measurement frame) of the loaded-by-gravity robot at commanded
-    angles `q`, and whether the equilibrium converged."""
-    eq = tree_equilibrium(robot, q)
+    angles `q`, and whether the equilibrium converged; differentiable as
+    `tree_equilibrium`."""
+    eq = tree_equilibrium(robot, q, derivative_rtol=derivative_rtol)
     return marker_positions(robot, q, eq.phi), eq.converged
