@@ -136,11 +136,13 @@ def _scaled_information(obs, nominal, sigma):
     return jnp.einsum("mrp,mrq,m->pq", As, As, w)
 
 
-def _factor(M) -> tuple[Float[Array, "p p"], Bool[Array, ""]]:
+def _factor(M, rank_test: bool = True) -> tuple[Float[Array, "p p"], Bool[Array, ""]]:
     # The rank test of every fit (`well_conditioned`) on the information matrix; the
-    # Cholesky factor for the (differentiable) covariance and log-determinant.
+    # Cholesky factor for the (differentiable) covariance and log-determinant. Without
+    # the rank test, only the factor's own failure (a non-finite entry) marks the design.
     L = cholesky(M)
-    return L, jnp.all(jnp.isfinite(L)) & well_conditioned(M)
+    ok = jnp.all(jnp.isfinite(L))
+    return L, (ok & well_conditioned(M)) if rank_test else ok
 
 
 def _inverse_factor(L) -> Float[Array, "p p"]:
@@ -169,6 +171,7 @@ def criteria_from_observation(
     weights: tuple[float, float] = (0.5, 0.5),
     select: tuple[int, ...] | None = None,
     task_weight: Float[Array, "p p"] | None = None,
+    rank_test: bool = True,
 ) -> DesignCriteria:
     """Criteria from observation matrices (see `design_observation`), per-row noise
     standard deviations `sigma` (m) and the nominal values. Traceable.
@@ -176,9 +179,12 @@ def criteria_from_observation(
     `select`: indices of the parameters the criteria are about (the marginal covariance
     of those, all parameters still being estimated); default all. `task_weight`: a
     task's information `W` (`task_information`, per unit of the parameters as given),
-    for the task criterion `trace(C W)` (m²)."""
+    for the task criterion `trace(C W)` (m²). `rank_test=False` skips the rank test of
+    the information matrix (`well_conditioned`, an eigenvalue iteration) and marks a
+    design only where its Cholesky factorisation fails: for an optimiser's objective,
+    evaluated at every step, whose results are tested in full afterwards."""
     M = _scaled_information(obs, nominal, sigma)
-    L, ok = _factor(M)
+    L, ok = _factor(M, rank_test)
     X = _inverse_factor(L)
     cov_rel = X.T @ X  # covariance of the relative errors
     scale = jnp.abs(nominal)
@@ -189,7 +195,7 @@ def criteria_from_observation(
         # Marginal covariance of the selected parameters: its log-determinant from its
         # own Cholesky factor.
         S = np.asarray(select)
-        Ls, _ = _factor(cov_rel[np.ix_(S, S)])
+        Ls, _ = _factor(cov_rel[np.ix_(S, S)], rank_test=False)
         logdet_rel = 2.0 * jnp.sum(jnp.log(jnp.abs(jnp.diagonal(Ls))))
         var_rel, sc = var_rel[S], scale[S]
     else:

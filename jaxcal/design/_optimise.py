@@ -141,7 +141,11 @@ def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
 def _penalised(z, args):
     problem, weight = args
     q = _decode(problem, z)
-    c = problem_criteria(problem, q)
+    # Without the rank test's eigenvalue iteration, a sequential loop that was most of a
+    # step's cost on a GPU (benchmarks/README.md); a step towards a singular design
+    # already meets a criterion growing without bound. Every start's result is
+    # evaluated with it (`_evaluate_batch`).
+    c = problem_criteria(problem, q, rank_test=False)
     viol = constraint_values(problem.robot, q)[:, 1:] + _MARGIN
     pen = jnp.sum((jax.nn.relu(viol) / _LENGTH) ** 2)
     gap = _gap_violation(problem, z[1]) + _GAP_MARGIN

@@ -174,7 +174,7 @@ class DesignProblem(eqx.Module):
         )
 
 
-def problem_criteria(problem: DesignProblem, q) -> DesignCriteria:
+def problem_criteria(problem: DesignProblem, q, *, rank_test: bool = True) -> DesignCriteria:
     robot = problem.robot
     assert robot.experiment is not None
     force = design_loads(robot, q, problem.loads)
@@ -199,6 +199,7 @@ def problem_criteria(problem: DesignProblem, q) -> DesignCriteria:
         weights=problem.weights,
         select=select_parameters(problem.names(), problem.focus),
         task_weight=problem.task,
+        rank_test=rank_test,
     )
 
 
