@@ -28,6 +28,8 @@ import pytest
 
 import jaxcal
 from jaxcal.internal import (
+    DERIVATIVE_RTOL,
+    JACOBIAN_RTOL,
     LM_CHI2_TOL,
     map_in_chunks,
     pivoted_subset,
@@ -138,7 +140,7 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
     assert float(jnp.max(jnp.abs(g))) < 1e-9  # N·m
 
     # d(marker)/d(compliance) by the implicit function theorem against central differences.
-    def marker(c, rtol=1e-6):
+    def marker(c, rtol=DERIVATIVE_RTOL):
         r = eqx.tree_at(lambda t: t.compliance, robot, c)
         return jaxcal.predict_markers(r, q, derivative_rtol=rtol)[0][0]
 
@@ -149,7 +151,10 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
         tangent = jax.jvp(marker, (c,), (direction,))[1]
         # Reverse mode (what a calibration's Jacobian uses) transposes the same adjoint
         # solve; also with the looser solve of a fit's Jacobian.
-        rev = [jnp.einsum("ijk,jk->i", jax.jacrev(marker)(c, r), direction) for r in (1e-6, 1e-4)]
+        rev = [
+            jnp.einsum("ijk,jk->i", jax.jacrev(marker)(c, r), direction)
+            for r in (DERIVATIVE_RTOL, JACOBIAN_RTOL)
+        ]
         return tangent, *rev
 
     tangent, rev, loose = derivatives(robot.compliance)
@@ -158,8 +163,9 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
     fd = (at(robot.compliance + h * direction) - at(robot.compliance - h * direction)) / (2 * h)
     np.testing.assert_allclose(tangent, fd, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(rev, tangent, rtol=1e-8, atol=1e-12)
-    # Within the looser solve's accuracy: ρ/(1 − ρ)·1e-4 of the adjoint's size, ρ < 0.5.
-    np.testing.assert_allclose(loose, rev, rtol=1e-4)
+    # Within the looser solve's accuracy: ρ/(1 − ρ)·JACOBIAN_RTOL of the adjoint's size,
+    # ρ < 0.5.
+    np.testing.assert_allclose(loose, rev, rtol=JACOBIAN_RTOL)
 
 
 def test_jit_vmap_consistency(justin, data):
