@@ -5,8 +5,9 @@ A pytest plugin. Run: `PYTHONPATH=benchmarks .venv/bin/python -m pytest -p suite
 (any pytest arguments; the xdist workers load it too). Each process writes
 `suite-times-<worker>.json` in `$SUITE_TIMES_DIR` (default: the current directory), and
 `python benchmarks/suite_times.py [DIR]` prints the totals, the files and the tests
-that take longest. Subprocesses (notebook kernels, the command line run as a process)
-are counted as run time of their test.
+that take longest, and the programs whose compiles took longest (with how often each
+was compiled). Subprocesses (notebook kernels, the command line run as a process) are
+counted as run time of their test.
 """
 
 from __future__ import annotations
@@ -24,14 +25,26 @@ _EVENTS = {
     "/jax/core/compile/backend_compile_duration": "compile",
     "/jax/core/compile/jaxpr_trace_duration": "trace",
     "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+    # compile time that a hit of the persistent compilation cache saved (not in `wall`)
+    "/jax/compilation_cache/compile_time_saved_sec": "saved",
 }
 _current = ["<outside tests>"]
 _times: dict = collections.defaultdict(lambda: collections.defaultdict(float))
+# Per program name: [compiles, compile seconds, traces, trace seconds]. A name compiled
+# many times is a program whose shapes or static arguments change from call to call.
+_programs: dict = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
 
 
-def _listener(event: str, duration: float, **_) -> None:
-    if event in _EVENTS:
-        _times[_current[0]][_EVENTS[event]] += duration
+def _listener(event: str, duration: float, fun_name: str = "?", **_) -> None:
+    kind = _EVENTS.get(event)
+    if kind is None:
+        return
+    _times[_current[0]][kind] += duration
+    if kind in ("compile", "trace"):
+        entry = _programs[fun_name]
+        at = 0 if kind == "compile" else 2
+        entry[at] += 1
+        entry[at + 1] += duration
 
 
 def pytest_configure(config):
@@ -53,10 +66,17 @@ def pytest_sessionfinish(session):
     out = os.path.join(os.environ.get("SUITE_TIMES_DIR", "."), f"suite-times-{worker}.json")
     with open(out, "w") as f:
         json.dump({k: dict(v) for k, v in _times.items()}, f)
+    with open(out.replace("suite-times-", "suite-programs-"), "w") as f:
+        json.dump(dict(_programs), f)
 
 
 def _report(directory: str) -> None:
     tests: dict = {}
+    programs: dict = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
+    for path in glob.glob(os.path.join(directory, "suite-programs-*.json")):
+        with open(path) as f:
+            for name, entry in json.load(f).items():
+                programs[name] = [a + b for a, b in zip(programs[name], entry, strict=True)]
     for path in glob.glob(os.path.join(directory, "suite-times-*.json")):
         with open(path) as f:
             tests.update(json.load(f))
@@ -67,7 +87,7 @@ def _report(directory: str) -> None:
 
     def line(label, t):
         rest = t.get("wall", 0.0) - sum(t.get(k, 0.0) for k in kinds)
-        parts = "  ".join(f"{k} {t.get(k, 0.0):6.1f}" for k in kinds)
+        parts = "  ".join(f"{k} {t.get(k, 0.0):6.1f}" for k in (*kinds, "saved"))
         return f"{t.get('wall', 0.0):7.1f} s  {parts}  rest {rest:6.1f}  {label}"
 
     print(line("all tests", sum(files.values(), collections.Counter())))
@@ -75,6 +95,9 @@ def _report(directory: str) -> None:
         print(f"\nslowest {label}:")
         for name, t in sorted(group.items(), key=lambda kv: -kv[1].get("wall", 0.0))[:15]:
             print(line(name, t))
+    print("\nprograms by compile time (compiles, compile s, traces, trace s):")
+    for name, (n, t, m, u) in sorted(programs.items(), key=lambda kv: -kv[1][1])[:30]:
+        print(f"{n:5d} {t:7.1f} s  {m:5d} {u:7.1f} s  {name}")
 
 
 if __name__ == "__main__":

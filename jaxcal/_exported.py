@@ -37,6 +37,7 @@ __all__ = ["export_directory", "exported", "set_export_directory"]
 _DIR: Path | None = None
 _LOADED: dict[str, Any] = {}
 _KEYS: dict[tuple, str] = {}
+_NAMES: dict[str, str] = {}  # a stored program's file name: its function's name
 _UNEXPORTABLE = b"unexportable"
 _ARRAY = "<jaxcal exported array>"  # an output array's place in a stored skeleton
 
@@ -113,6 +114,7 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         arrays = [x for x, a in zip(leaves, is_arr, strict=True) if a]
         statics = [x for x, a in zip(leaves, is_arr, strict=True) if not a]
         key = _key(fn, tag, treedef, arrays, statics)
+        _NAMES[f"{key}-cache"] = getattr(fn, "__name__", "exported")
         got = _LOADED.get(key) or _load(_DIR / f"{key}-cache")
         if got is None:
             got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache")
@@ -141,7 +143,7 @@ def _load(path: Path):
         return _UNEXPORTABLE
     try:
         blob, skeleton = pickle.loads(data)
-        return jax.jit(jax.export.deserialize(bytearray(blob)).call), skeleton
+        return _jit_named(jax.export.deserialize(bytearray(blob)).call, path), skeleton
     except Exception:
         return None  # a stale or corrupt entry: export again
 
@@ -170,4 +172,15 @@ def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
         _write(path, data)
     except OSError:
         pass  # an unwritable cache is the compilation cache's warning to give
-    return _UNEXPORTABLE if exp is None else (jax.jit(exp.call), skeleton[0])
+    return _UNEXPORTABLE if exp is None else (_jit_named(exp.call, path), skeleton[0])
+
+
+def _jit_named(call: Callable, path: Path) -> Callable:
+    """`jax.jit(call)` under the stored function's name (`jax_log_compiles` and the
+    compile-time events then name the program, not `Exported.call`)."""
+
+    def run(*args):
+        return call(*args)
+
+    run.__name__ = run.__qualname__ = _NAMES.get(path.name, "exported")
+    return jax.jit(run)
