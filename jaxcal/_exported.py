@@ -11,7 +11,8 @@ hit of the compilation cache.
 
 The key of a stored program is everything the traced program depends on: jaxcal's own
 source (a hash of its files), JAX's version, the backend, float64 on or off, the
-arguments' structure and static (non-array) values, and every array's shape and dtype.
+arguments' structure and static (non-array) values, every array's shape and dtype, and
+the number of devices.
 A change of any of them stores a new program. It is on only while the compilation cache
 is (`enable_compilation_cache`), and a program that cannot be exported or read back is
 simply traced as without it.
@@ -29,6 +30,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.core
+import numpy as np
 
 from ._io import atomic_file
 
@@ -69,7 +71,7 @@ def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
     # SuperModel's) costs milliseconds, and some programs are called hundreds of times.
     shapes = tuple((a.shape, str(a.dtype)) for a in arrays)
     x64 = bool(jax.config.jax_enable_x64)  # pyright: ignore[reportAttributeAccessIssue]
-    memo = (fn, tag, treedef, tuple(statics), shapes, x64)
+    memo = (fn, tag, treedef, tuple(statics), shapes, x64, jax.device_count())
     try:
         key = _KEYS.get(memo)
     except (TypeError, ValueError):  # an unhashable (or array-valued) static value
@@ -86,6 +88,7 @@ def _key_of(fn: Callable, tag: str, treedef, arrays, statics) -> str:
         _source_hash(),
         jax.__version__,
         jax.default_backend(),
+        str(jax.device_count()),  # a program split among devices is made for their number
         str(jax.config.jax_enable_x64),  # pyright: ignore[reportAttributeAccessIssue]
         str(treedef),
         repr(statics),
@@ -121,17 +124,27 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         _LOADED[key] = got
         if got == _UNEXPORTABLE:
             return fn(*args)
-        run, skeleton = got
+        run, skeleton, placement = got
         flat, out_def = jax.tree.flatten(skeleton)
         # Committed and uncommitted arguments lower to different calls (a second compile
-        # of the whole program): commit them all to the default device.
-        device = jax.devices()[0]
-        outs = iter(run(*jax.device_put(arrays, device)))
+        # of the whole program): commit them all, to the default device or, where the
+        # program divides its work among several, to all of them (replicated).
+        outs = iter(run(*jax.device_put(arrays, placement)))
         return jax.tree.unflatten(
             out_def, [next(outs) if isinstance(x, str) and x == _ARRAY else x for x in flat]
         )
 
     return call
+
+
+@functools.cache
+def _placement(devices: int) -> Any:
+    """Where a stored program's arguments go: the default device, or replicated over
+    the first `devices` devices for a program that divides its work among them."""
+    if devices == 1:
+        return jax.devices()[0]
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:devices]), ("devices",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
 
 def _load(path: Path):
@@ -143,7 +156,8 @@ def _load(path: Path):
         return _UNEXPORTABLE
     try:
         blob, skeleton = pickle.loads(data)
-        return _jit_named(jax.export.deserialize(bytearray(blob)).call, path), skeleton
+        exp = jax.export.deserialize(bytearray(blob))
+        return _jit_named(exp.call, path), skeleton, _placement(exp.nr_devices)
     except Exception:
         return None  # a stale or corrupt entry: export again
 
@@ -172,7 +186,9 @@ def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
         _write(path, data)
     except OSError:
         pass  # an unwritable cache is the compilation cache's warning to give
-    return _UNEXPORTABLE if exp is None else (_jit_named(exp.call, path), skeleton[0])
+    if exp is None:
+        return _UNEXPORTABLE
+    return _jit_named(exp.call, path), skeleton[0], _placement(exp.nr_devices)
 
 
 def _jit_named(call: Callable, path: Path) -> Callable:

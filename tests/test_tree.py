@@ -17,7 +17,10 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import equinox as eqx
@@ -576,3 +579,44 @@ def test_cli_identify_simulate_round_trip(identified, tmp_path):
     a, b = jaxcal.read_markers(data, robot), jaxcal.read_markers(pred, robot)
     err = np.linalg.norm(np.asarray(a.markers) - np.asarray(b.markers), axis=-1)
     assert abs(np.sqrt(np.mean(err**2)) * 1e3 - out["rms_mm"]) < 1e-3
+
+
+_TWO_DEVICES = """
+import sys, json
+import jax
+jax.config.update("jax_num_cpu_devices", 2)
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import jaxcal
+from jaxcal.internal import scaled_jacobian
+jaxcal.enable_compilation_cache()  # the run's cache (inherited): the stored-program path
+robot = jaxcal.load_tree("dlr_agile_justin")
+data = jaxcal.read_markers(sys.argv[1], robot).subset(np.arange(7))
+table = jaxcal.parameter_table(robot, jaxcal.default_groups(robot))
+y, ok = jaxcal.predicted_markers(robot, data)
+J = scaled_jacobian(robot, table, data)
+np.savez(sys.argv[2], y=y, ok=ok, J=J, devices=jax.device_count())
+"""
+
+
+def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_path):
+    """Where JAX shows several devices (the command line's calibrations on a CPU: one per
+    core), the poses are divided among them; 7 poses on 2 devices exercise the padding.
+    Every pose is computed alone by the same operations: the same numbers, bit for bit."""
+    out = tmp_path / "two.npz"
+    proc = subprocess.run(
+        [sys.executable, "-c", _TWO_DEVICES, str(DATA), str(out)],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, JAX_PLATFORMS="cpu"),
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    two = np.load(out)
+    assert int(two["devices"]) == 2
+    sub = data.subset(np.arange(7))
+    y, ok = jaxcal.predicted_markers(justin, sub)
+    table = jaxcal.parameter_table(justin, jaxcal.default_groups(justin))
+    np.testing.assert_array_equal(two["y"], y)
+    np.testing.assert_array_equal(two["ok"], ok)
+    np.testing.assert_array_equal(two["J"], scaled_jacobian(justin, table, sub))

@@ -222,7 +222,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     said = threading.Event()  # "interrupted" printed
     with _end_if_stuck(args.command, said):
         try:
-            return _run(args)
+            return _run(args, own_process=argv is None)
         except KeyboardInterrupt:
             said.set()
             print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
@@ -296,12 +296,33 @@ def _end_if_stuck(command: str, said: threading.Event):
         writer.close()
 
 
-def _run(args: argparse.Namespace) -> int:
+# The commands whose fits divide a robot tree's poses among devices (`split_map`).
+_SPLIT_COMMANDS = ("identify", "validate", "discover")
+
+
+def _one_device_per_core(jax) -> None:
+    # A CPU shows XLA one device unless told before its first computation: one per core
+    # this process may use (at most 8), so that a calibration's poses are computed on
+    # all of them. Only on the process's own command line (`main(argv)` called from
+    # Python leaves the caller's JAX as it is), and only before the first computation.
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    try:
+        jax.config.update("jax_num_cpu_devices", max(1, min(cores, 8)))
+    except RuntimeError:
+        pass
+
+
+def _run(args: argparse.Namespace, own_process: bool = False) -> int:
     import jax
 
     # Identification and simulation at µm precision need float64; the CLI enables it
     # explicitly (the library never flips global config on import).
     jax.config.update("jax_enable_x64", True)
+    if own_process and args.command in _SPLIT_COMMANDS:
+        _one_device_per_core(jax)
     from .._io import DataError
     from .._model.simulate import DeflectionError
     from .._output import OutputError

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._batching import split_map
 from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
@@ -103,7 +104,7 @@ def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
 
 def _predict(robot: TreeRobot, table, p, q, rows, markers):
     r = set_vector(robot, table, p)
-    y, ok = jax.vmap(predict_markers, in_axes=(None, 0))(r, q)
+    y, ok = split_map(predict_markers, r, q)
     return y[rows, markers], ok
 
 
@@ -257,7 +258,7 @@ def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
         y, ok = predict_markers(set_vector(robot, table, p), q, derivative_rtol=JACOBIAN_RTOL)
         return y, (y, ok)
 
-    J, (y, ok) = jax.vmap(jax.jacrev(pose, has_aux=True), in_axes=(None, 0))(p, q)
+    J, (y, ok) = split_map(jax.jacrev(pose, has_aux=True), p, q)
     return y[rows, markers], ok, J[rows, markers]
 
 
@@ -387,7 +388,7 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
 
 @eqx.filter_jit
 def _markers_of(robot: TreeRobot, q: Float[Array, "n N"]):
-    return jax.vmap(predict_markers, in_axes=(None, 0))(robot, q)
+    return split_map(predict_markers, robot, q)
 
 
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
