@@ -71,8 +71,8 @@ def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -
 
 def split_map(fn: Callable[..., Any], shared: Any, xs: Any) -> Any:
     """`jax.vmap(fn, in_axes=(None, 0))(shared, xs)` inside a traced program, with the
-    members of `xs` (a pytree, leading axis) divided among the default backend's
-    devices where it has several: each device maps its share, the same program on
+    members of `xs` (a pytree, leading axis) divided among this process's devices of the
+    default backend where it has several: each device maps its share, the same program on
     different data (`shard_map`; the last share padded with copies of member 0, whose
     results are dropped). The results are the single device's, bit for bit: every
     member is computed alone, by the same operations.
@@ -82,7 +82,9 @@ def split_map(fn: Callable[..., Any], shared: Any, xs: Any) -> Any:
     cores. The command line gives a CPU one device per core for the commands that
     calibrate (`jax_num_cpu_devices`), and a 300-pose Jacobian of Agile Justin took 0.13 s
     on two devices instead of 0.20 s on one."""
-    devices = jax.devices()
+    # This process's devices: under `jax.distributed`, `jax.devices()` lists every
+    # process's, and the poses here are this process's own.
+    devices = jax.local_devices()
     n = len(devices)
     size = jax.tree.leaves(xs)[0].shape[0]
     if n == 1 or size < 2 * n:

@@ -143,7 +143,7 @@ def _placement(devices: int) -> Any:
     the first `devices` devices for a program that divides its work among them."""
     if devices == 1:
         return jax.devices()[0]
-    mesh = jax.sharding.Mesh(np.array(jax.devices()[:devices]), ("devices",))
+    mesh = jax.sharding.Mesh(np.array(jax.local_devices()[:devices]), ("devices",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
 
