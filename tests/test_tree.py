@@ -602,7 +602,10 @@ np.savez(sys.argv[2], y=y, ok=ok, J=J, devices=jax.device_count())
 def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_path):
     """Where JAX shows several devices (the command line's calibrations on a CPU: one per
     core), the poses are divided among them; 7 poses on 2 devices exercise the padding.
-    Every pose is computed alone by the same operations: the same numbers, bit for bit."""
+    Every pose is computed alone by the same operations, so the numbers agree to
+    round-off; what is allowed is what the solvers leave: the fixed point's 1e-12 (rad,
+    times arms of about 1 m) in the predictions, `JACOBIAN_RTOL` of the largest entry in
+    the Jacobian. A pose mixed up with another would be off by millimetres."""
     out = tmp_path / "two.npz"
     proc = subprocess.run(
         [sys.executable, "-c", _TWO_DEVICES, str(DATA), str(out)],
@@ -617,6 +620,7 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     sub = data.subset(np.arange(7))
     y, ok = jaxcal.predicted_markers(justin, sub)
     table = jaxcal.parameter_table(justin, jaxcal.default_groups(justin))
-    np.testing.assert_array_equal(two["y"], y)
+    np.testing.assert_allclose(two["y"], y, rtol=0, atol=1e-11)
     np.testing.assert_array_equal(two["ok"], ok)
-    np.testing.assert_array_equal(two["J"], scaled_jacobian(justin, table, sub))
+    J = scaled_jacobian(justin, table, sub)
+    np.testing.assert_allclose(two["J"], J, rtol=0, atol=JACOBIAN_RTOL * np.abs(J).max())
