@@ -31,7 +31,8 @@ _EVENTS = {
 _current = ["<outside tests>"]
 _times: dict = collections.defaultdict(lambda: collections.defaultdict(float))
 # Per program name: [compiles, compile seconds, traces, trace seconds]. A name compiled
-# many times is a program whose shapes or static arguments change from call to call.
+# many times is a program whose shapes or static arguments change from call to call
+# (the compiles include hits of the persistent cache: its lookup is inside the event).
 _programs: dict = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
 
 
@@ -41,6 +42,9 @@ def _listener(event: str, duration: float, fun_name: str = "?", **_) -> None:
         return
     _times[_current[0]][kind] += duration
     if kind in ("compile", "trace"):
+        # compile events name the program `jit(f)`, trace events `f`
+        if fun_name.startswith("jit(") and fun_name.endswith(")"):
+            fun_name = fun_name[4:-1]
         entry = _programs[fun_name]
         at = 0 if kind == "compile" else 2
         entry[at] += 1

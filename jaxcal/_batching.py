@@ -5,19 +5,69 @@ A jitted, vmapped program is compiled for the exact shapes it sees: a path of 12
 and one of 20, or 57 fits and 60, would each cost a compile of minutes on a small
 machine. Calling it on chunks of one size (the last padded with copies of member 0,
 whose results are dropped) trades a little padded work for one compile.
+
+`split_map` divides a batch among a process's devices instead, where asked to
+(`divide_among_devices`): the command line's calibrations of tree robots on a CPU with
+one device per core. Off by default, so that a library user's devices and meshes are
+theirs to arrange.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec as P
 
-__all__ = ["batch_map", "chunk_width", "map_in_chunks", "split_map"]
+__all__ = [
+    "batch_map",
+    "chunk_width",
+    "divide_among_devices",
+    "dividing_among_devices",
+    "map_in_chunks",
+    "one_device_per_core",
+    "split_map",
+]
+
+_DIVIDE = [False]
+
+
+def divide_among_devices(on: bool = True) -> None:
+    """Whether `split_map` divides its members among this process's devices (off: a
+    plain `vmap`). Set before tracing: a traced program keeps what it was traced with
+    (stored programs are keyed on it)."""
+    _DIVIDE[0] = bool(on)
+
+
+def one_device_per_core() -> bool:
+    """Give the CPU one device per core this process may use (at most 8: the gain was
+    measured on 2 cores only) and turn `divide_among_devices` on; returns whether it
+    did. Not where the user has chosen the devices (`JAX_NUM_CPU_DEVICES`, XLA's
+    `--xla_force_host_platform_device_count`), nor once JAX has computed (the count is
+    read when its CPU client starts). For the command line's calibrations of tree
+    robots; a program's own choice, as `jax.config` is."""
+    if "JAX_NUM_CPU_DEVICES" in os.environ or "device_count" in os.environ.get("XLA_FLAGS", ""):
+        return False
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    try:
+        jax.config.update("jax_num_cpu_devices", max(1, min(cores, 8)))
+    except RuntimeError:
+        return False
+    divide_among_devices(True)
+    return True
+
+
+def dividing_among_devices() -> bool:
+    """Whether `split_map` divides its members among devices (`divide_among_devices`)."""
+    return _DIVIDE[0]
 
 
 def chunk_width(cpu: int, accelerator: int) -> int:
@@ -70,38 +120,39 @@ def map_in_chunks(fn: Callable[..., Any], size: int, chunk: int, *arrays: Any) -
 
 
 def split_map(fn: Callable[..., Any], shared: Any, xs: Any) -> Any:
-    """`jax.vmap(fn, in_axes=(None, 0))(shared, xs)` inside a traced program, with the
-    members of `xs` (a pytree, leading axis) divided among this process's devices of the
-    default backend where it has several: each device maps its share, the same program on
-    different data (`shard_map`; the last share padded with copies of member 0, whose
-    results are dropped). Every member is computed alone, by the same operations: the
-    results are the single device's to round-off (XLA may order a sum differently for
-    a share's shape: on Agile Justin's 300 poses a discover's held-out errors moved by
-    2e-14 relative), within the solvers' tolerances whatever happens.
+    """`jax.vmap(fn, in_axes=(None, 0))(shared, xs)` inside a traced program (`xs`: a
+    pytree of arrays with a leading member axis), with the members divided among this
+    process's devices where `divide_among_devices` is on and there are several: each
+    device maps its share, the same program on different data (`shard_map`; the last
+    share padded with copies of member 0, whose results are dropped). Every member is
+    computed alone, by the same operations: the results are the single device's to
+    round-off (XLA may order a sum differently for a share's shape, and what the same
+    program computes from them, e.g. a fit's covariance, too: on Agile Justin's 300
+    poses a discover's held-out errors moved by 2e-14 relative).
 
     Why: XLA runs the batched loops of the equilibrium (fixed point, implicit
     derivative) on one thread of a CPU, so one process of a calibration used 1.2 of 2
-    cores. The command line gives a CPU one device per core for the commands that
-    calibrate (`jax_num_cpu_devices`), and a 300-pose Jacobian of Agile Justin took 0.13 s
-    on two devices instead of 0.20 s on one."""
-    # This process's devices: under `jax.distributed`, `jax.devices()` lists every
-    # process's, and the poses here are this process's own.
-    devices = jax.local_devices()
+    cores; a 300-pose Jacobian of Agile Justin took 0.13 s on two devices instead of
+    0.20 s on one."""
+    devices = jax.local_devices() if _DIVIDE[0] else []
     n = len(devices)
     size = jax.tree.leaves(xs)[0].shape[0]
-    if n == 1 or size < 2 * n:
+    if n < 2 or size < 2 * n:
         return jax.vmap(fn, in_axes=(None, 0))(shared, xs)
     pad = (-size) % n
     if pad:
         xs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), xs)
+    # Only arrays cross into the devices' program; the rest (static fields, callables)
+    # stays as the caller gave it.
+    arrays, static = eqx.partition(shared, eqx.is_array)
     mesh = Mesh(np.array(devices), ("members",))
     # The per-member loops carry values that do not vary across devices at their start
     # (constants of the robot): JAX's check of varying axes would reject those carries.
     out = jax.shard_map(
-        jax.vmap(fn, in_axes=(None, 0)),
+        jax.vmap(lambda a, x: fn(eqx.combine(a, static), x), in_axes=(None, 0)),
         mesh=mesh,
         in_specs=(P(), P("members")),
         out_specs=P("members"),
         check_vma=False,
-    )(shared, xs)
+    )(arrays, xs)
     return jax.tree.map(lambda x: x[:size], out) if pad else out

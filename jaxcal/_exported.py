@@ -12,7 +12,7 @@ hit of the compilation cache.
 The key of a stored program is everything the traced program depends on: jaxcal's own
 source (a hash of its files), JAX's version, the backend, float64 on or off, the
 arguments' structure and static (non-array) values, every array's shape and dtype, and
-the number of devices.
+the number of this process's devices and whether work is divided among them.
 A change of any of them stores a new program. It is on only while the compilation cache
 is (`enable_compilation_cache`), and a program that cannot be exported or read back is
 simply traced as without it.
@@ -32,6 +32,7 @@ import jax
 import jax.core
 import numpy as np
 
+from ._batching import dividing_among_devices
 from ._io import atomic_file
 
 __all__ = ["export_directory", "exported", "set_export_directory"]
@@ -39,7 +40,6 @@ __all__ = ["export_directory", "exported", "set_export_directory"]
 _DIR: Path | None = None
 _LOADED: dict[str, Any] = {}
 _KEYS: dict[tuple, str] = {}
-_NAMES: dict[str, str] = {}  # a stored program's file name: its function's name
 _UNEXPORTABLE = b"unexportable"
 _ARRAY = "<jaxcal exported array>"  # an output array's place in a stored skeleton
 
@@ -71,7 +71,8 @@ def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
     # SuperModel's) costs milliseconds, and some programs are called hundreds of times.
     shapes = tuple((a.shape, str(a.dtype)) for a in arrays)
     x64 = bool(jax.config.jax_enable_x64)  # pyright: ignore[reportAttributeAccessIssue]
-    memo = (fn, tag, treedef, tuple(statics), shapes, x64, jax.device_count())
+    split = (jax.local_device_count(), dividing_among_devices())
+    memo = (fn, tag, treedef, tuple(statics), shapes, x64, split)
     try:
         key = _KEYS.get(memo)
     except (TypeError, ValueError):  # an unhashable (or array-valued) static value
@@ -88,7 +89,8 @@ def _key_of(fn: Callable, tag: str, treedef, arrays, statics) -> str:
         _source_hash(),
         jax.__version__,
         jax.default_backend(),
-        str(jax.device_count()),  # a program split among devices is made for their number
+        # a program divided among devices is made for their number
+        str((jax.local_device_count(), dividing_among_devices())),
         str(jax.config.jax_enable_x64),  # pyright: ignore[reportAttributeAccessIssue]
         str(treedef),
         repr(statics),
@@ -117,10 +119,10 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         arrays = [x for x, a in zip(leaves, is_arr, strict=True) if a]
         statics = [x for x, a in zip(leaves, is_arr, strict=True) if not a]
         key = _key(fn, tag, treedef, arrays, statics)
-        _NAMES[f"{key}-cache"] = getattr(fn, "__name__", "exported")
-        got = _LOADED.get(key) or _load(_DIR / f"{key}-cache")
+        name = getattr(fn, "__name__", "exported")
+        got = _LOADED.get(key) or _load(_DIR / f"{key}-cache", name)
         if got is None:
-            got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache")
+            got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache", name)
         _LOADED[key] = got
         if got == _UNEXPORTABLE:
             return fn(*args)
@@ -142,12 +144,12 @@ def _placement(devices: int) -> Any:
     """Where a stored program's arguments go: the default device, or replicated over
     the first `devices` devices for a program that divides its work among them."""
     if devices == 1:
-        return jax.devices()[0]
+        return jax.local_devices()[0]
     mesh = jax.sharding.Mesh(np.array(jax.local_devices()[:devices]), ("devices",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
 
-def _load(path: Path):
+def _load(path: Path, name: str):
     try:
         data = path.read_bytes()
     except OSError:
@@ -157,12 +159,14 @@ def _load(path: Path):
     try:
         blob, skeleton = pickle.loads(data)
         exp = jax.export.deserialize(bytearray(blob))
-        return _jit_named(exp.call, path), skeleton, _placement(exp.nr_devices)
+        if exp.nr_devices > jax.local_device_count():
+            return None  # made for more devices than this process has: trace again
+        return _jit_named(exp.call, name), skeleton, _placement(exp.nr_devices)
     except Exception:
         return None  # a stale or corrupt entry: export again
 
 
-def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
+def _export(fn, treedef, leaves, is_arr, arrays, path: Path, name: str):
     skeleton: list = []
 
     def flat(*xs):
@@ -188,15 +192,15 @@ def _export(fn, treedef, leaves, is_arr, arrays, path: Path):
         pass  # an unwritable cache is the compilation cache's warning to give
     if exp is None:
         return _UNEXPORTABLE
-    return _jit_named(exp.call, path), skeleton[0], _placement(exp.nr_devices)
+    return _jit_named(exp.call, name), skeleton[0], _placement(exp.nr_devices)
 
 
-def _jit_named(call: Callable, path: Path) -> Callable:
+def _jit_named(call: Callable, name: str) -> Callable:
     """`jax.jit(call)` under the stored function's name (`jax_log_compiles` and the
     compile-time events then name the program, not `Exported.call`)."""
 
     def run(*args):
         return call(*args)
 
-    run.__name__ = run.__qualname__ = _NAMES.get(path.name, "exported")
+    run.__name__ = run.__qualname__ = name
     return jax.jit(run)

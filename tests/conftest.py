@@ -100,6 +100,7 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=_order)
 
 
+@pytest.hookimpl(optionalhook=True)  # xdist's hook: unknown where xdist is not loaded
 def pytest_xdist_make_scheduler(config, log):
     # xdist's `loadfile` (the configured distribution), but each notebook's run its own
     # unit. Any other distribution a user asks for is xdist's own.

@@ -296,33 +296,22 @@ def _end_if_stuck(command: str, said: threading.Event):
         writer.close()
 
 
-# The commands whose fits divide a robot tree's poses among devices (`split_map`).
-_SPLIT_COMMANDS = ("identify", "validate", "discover")
-
-
-def _one_device_per_core(jax) -> None:
-    # A CPU shows XLA one device unless told before its first computation: one per core
-    # this process may use (at most 8), so that a calibration's poses are computed on
-    # all of them. Only on the process's own command line (`main(argv)` called from
-    # Python leaves the caller's JAX as it is), and only before the first computation.
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    try:
-        jax.config.update("jax_num_cpu_devices", max(1, min(cores, 8)))
-    except RuntimeError:
-        pass
-
-
 def _run(args: argparse.Namespace, own_process: bool = False) -> int:
     import jax
 
     # Identification and simulation at µm precision need float64; the CLI enables it
     # explicitly (the library never flips global config on import).
     jax.config.update("jax_enable_x64", True)
-    if own_process and args.command in _SPLIT_COMMANDS:
-        _one_device_per_core(jax)
+    if own_process and args.command in ("identify", "validate", "discover"):
+        # A tree robot's calibration divides its poses among one CPU device per core;
+        # the template's programs are not divided (and a different device count is a
+        # different entry of the compilation cache). `main(argv)` called from Python
+        # leaves the caller's JAX as it is.
+        from .._batching import one_device_per_core
+        from .._model.robot_files import is_tree_file
+
+        if is_tree_file(getattr(args, "robot", "")):
+            one_device_per_core()
     from .._io import DataError
     from .._model.simulate import DeflectionError
     from .._output import OutputError

@@ -4,7 +4,10 @@ public API (as `lineax.internal`): they may change between versions.
 The command line is not imported here (nothing in the library imports it); its test
 door is the submodule `jaxcal.internal.cli`."""
 
-from .._batching import map_in_chunks as map_in_chunks
+from .._batching import (
+    divide_among_devices as divide_among_devices,
+    map_in_chunks as map_in_chunks,
+)
 from .._cache import cache_info as cache_info, clear_cache as clear_cache
 from .._exported import (
     export_directory as export_directory,
