@@ -76,21 +76,20 @@ def _key(fn: Callable, tag: str, treedef, arrays, statics) -> str:
     try:
         key = _KEYS.get(memo)
     except (TypeError, ValueError):  # an unhashable (or array-valued) static value
-        return _key_of(fn, tag, treedef, arrays, statics)
+        return _key_of(fn, tag, treedef, arrays, statics, split)
     if key is None:
-        key = _KEYS[memo] = _key_of(fn, tag, treedef, arrays, statics)
+        key = _KEYS[memo] = _key_of(fn, tag, treedef, arrays, statics, split)
     return key
 
 
-def _key_of(fn: Callable, tag: str, treedef, arrays, statics) -> str:
+def _key_of(fn: Callable, tag: str, treedef, arrays, statics, split: tuple) -> str:
     parts = [
         f"{fn.__module__}.{fn.__qualname__}",
         tag,
         _source_hash(),
         jax.__version__,
         jax.default_backend(),
-        # a program divided among devices is made for their number
-        str((jax.local_device_count(), dividing_among_devices())),
+        str(split),  # a program divided among devices is made for their number
         str(jax.config.jax_enable_x64),  # pyright: ignore[reportAttributeAccessIssue]
         str(treedef),
         repr(statics),

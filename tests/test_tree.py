@@ -582,7 +582,7 @@ def test_cli_identify_simulate_round_trip(identified, tmp_path):
 
 
 _TWO_DEVICES = """
-import sys, json
+import sys
 import jax
 jax.config.update("jax_num_cpu_devices", 2)
 jax.config.update("jax_enable_x64", True)
@@ -607,11 +607,11 @@ np.savez(sys.argv[2], y=y, ok=ok, J=J, devices=jax.device_count())
 def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_path):
     """Where asked to (the command line's calibrations of tree robots on a CPU: one
     device per core), the poses are divided among the devices; 7 poses on 2 devices
-    exercise the padding.
-    Every pose is computed alone by the same operations, so the numbers agree to
-    round-off; what is allowed is what the solvers leave: the fixed point's 1e-12 (rad,
-    times arms of about 1 m) in the predictions, `JACOBIAN_RTOL` of the largest entry in
-    the Jacobian. A pose mixed up with another would be off by millimetres."""
+    exercise the padding. Every pose is computed alone by the same operations, so the
+    numbers agree to round-off; what is allowed is what the solvers leave: the fixed
+    point's 1e-12 (rad, times arms of about 1 m) in the predictions, `JACOBIAN_RTOL` of
+    the largest entry in the Jacobian. A pose mixed up with another would be off by
+    millimetres."""
     out = tmp_path / "two.npz"
     proc = subprocess.run(
         [sys.executable, "-c", _TWO_DEVICES, str(DATA), str(out)],
