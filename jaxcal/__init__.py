@@ -23,12 +23,8 @@ from ._identification.calibration import (
     save_robot as save_robot,
 )
 from ._identification.elastogeometric import (
-    Stage as Stage,
     TreeCalibration as TreeCalibration,
     calibrate_tree as calibrate_tree,
-    marker_errors as marker_errors,
-    predicted_markers as predicted_markers,
-    validate_tree as validate_tree,
 )
 from ._identification.identify import (
     identify as identify,
@@ -62,6 +58,12 @@ from ._identification.parameter_groups import (
     Parameter as Parameter,
     default_groups as default_groups,
     parameter_table as parameter_table,
+)
+from ._identification.tree_validation import (
+    Stage as Stage,
+    marker_errors as marker_errors,
+    predicted_markers as predicted_markers,
+    validate_tree as validate_tree,
 )
 from ._identification.two_step import (
     TwoStepSystem as TwoStepSystem,

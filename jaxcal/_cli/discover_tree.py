@@ -94,8 +94,8 @@ def write_outputs(args: argparse.Namespace, told, write_poses, figure) -> int:
 
 def run_tree(args: argparse.Namespace) -> int:
     """`jaxcal discover` for a tree robot."""
-    from .._identification.elastogeometric import marker_errors, split_rows
     from .._identification.parameter_groups import parse_groups
+    from .._identification.tree_validation import marker_errors, split_rows
     from .._markers import read_markers
     from ..discrepancy._tree import discover_tree
     from ..discrepancy._tree_candidates import candidate_robot, tree_candidates

@@ -228,7 +228,7 @@ def _not_determined_line(not_determined: dict, threshold: float, held: bool) -> 
 
 def simulate_tree(args: argparse.Namespace) -> int:
     """`jaxcal simulate` for a tree robot: the model's marker positions at the file's poses."""
-    from .._identification.elastogeometric import predicted_markers
+    from .._identification.tree_validation import predicted_markers
     from .._markers import read_markers, write_markers
 
     check_output_path(args.output, "-o")

@@ -72,9 +72,9 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._format import format_table
-    from .._identification.elastogeometric import split_rows, validate_tree
     from .._identification.parameter_groups import parameter_table, parse_groups
     from .._identification.result import THRESHOLD
+    from .._identification.tree_validation import split_rows, validate_tree
 
     robot, data = load_tree_data(args)
     groups = parse_groups(args.params, robot)

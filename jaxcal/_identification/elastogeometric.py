@@ -33,7 +33,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from .._batching import split_map
 from .._exported import exported
@@ -51,26 +50,15 @@ from .parameter_groups import (
     prior_stds,
     set_vector,
 )
+from .pivoting import PIVOT_RCOND, fitted_parameters
 from .result import THRESHOLD, Z95, relative_std, upper_bound95
 
 __all__ = [
     "TreeCalibration",
-    "Stage",
-    "pivoted_subset",
-    "fitted_parameters",
     "calibrate_tree",
-    "validate_tree",
-    "split_rows",
-    "marker_errors",
-    "predicted_markers",
     "observations",
     "scaled_jacobian",
 ]
-
-#: A pivoted column is kept while its R diagonal exceeds this fraction of the first's
-#: (columns scaled to their parameter's typical size): a condition number of the fitted
-#: block of at most ~1e4.
-PIVOT_RCOND = 1e-4
 
 #: Levenberg–Marquardt stops when a step changes every parameter by less than this, in
 #: units of its typical size (`Parameter.scale`: 1 mm, 1 mrad, 10 µrad/(N·m)).
@@ -134,53 +122,6 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
         jnp.asarray([p.scale for p in table]),
     )
     return np.asarray(J).reshape(len(rows), 3, len(table))
-
-
-def pivoted_subset(
-    J: np.ndarray, rcond: float = PIVOT_RCOND, *, normalise: bool = False
-) -> np.ndarray:
-    """Host-side: `(q,)` bools, the columns of `J` `(m, q)` that QR with column pivoting
-    picks before the remaining columns' residual norm falls below `rcond` times the first
-    pick's (greedy modified Gram–Schmidt; exact redundancies and dead columns are left
-    out). The caller scales the columns (`calibrate_tree`: to each parameter's typical
-    size, so that a parameter whose typical change moves the markers by far less than
-    the noise is not fitted); `normalise` tests linear independence alone instead (unit
-    columns; on Agile Justin it frees more springs and the fit converges more slowly)."""
-    A = np.array(J, np.float64)
-    A[~np.isfinite(A)] = 0.0
-    if normalise:
-        # Identifiability is linear independence, not size: unit columns (a column
-        # with no sensitivity stays zero and is never picked).
-        n = np.linalg.norm(A, axis=0)
-        live = n > 1e-12 * max(float(n.max(initial=0.0)), 1e-300)
-        A = np.where(live, A / np.where(live, n, 1.0), 0.0)
-    q = A.shape[1]
-    chosen = np.zeros(q, bool)
-    norms = np.linalg.norm(A, axis=0)
-    first = None
-    for _ in range(min(A.shape)):
-        norms = np.where(chosen, -1.0, np.linalg.norm(A, axis=0))
-        k = int(np.argmax(norms))
-        if first is None:
-            first = norms[k]
-        if first <= 0 or norms[k] <= rcond * first:
-            break
-        chosen[k] = True
-        v = A[:, k] / norms[k]
-        A -= np.outer(v, v @ A)
-    return chosen
-
-
-def fitted_parameters(
-    J: np.ndarray, want: np.ndarray, has_prior: np.ndarray, rcond: float = PIVOT_RCOND
-) -> np.ndarray:
-    """Host-side: `(P,)` bools, the parameters a calibration fits of those it `want`s:
-    every one with a prior (the prior determines what the data do not), and of the
-    others those `pivoted_subset` picks from the scaled Jacobian `J` `(m, P)`."""
-    fitted = want & has_prior
-    pivot = want & ~has_prior
-    fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
-    return fitted
 
 
 class TreeCalibration(NamedTuple):
@@ -384,87 +325,3 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
         seconds=time.perf_counter() - t0,
         prior_std=prior if priors else None,
     )
-
-
-@eqx.filter_jit
-def _markers_of(robot: TreeRobot, q: Float[Array, "n N"]):
-    return split_map(predict_markers, robot, q)
-
-
-def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
-    """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, and
-    `(n,)` whether each equilibrium converged."""
-    y, ok = _markers_of(robot, jnp.asarray(data.q))
-    return np.asarray(y), np.asarray(ok)
-
-
-def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
-    """3-D error (m) of every seen marker, measured − model, in `observations` order."""
-    y, _ = predicted_markers(robot, data)
-    rows, markers = observations(data)
-    return np.linalg.norm(np.asarray(data.markers)[rows, markers] - y[rows, markers], axis=-1)
-
-
-class Stage(NamedTuple):
-    """One row of a validation table: the groups fitted so far, and the held-out 3-D
-    marker errors (mm) after fitting them; `not_determined`: the fitted springs, masses
-    and spring-law constants the training rows do not determine one by one;
-    `calibration`: the stage's calibration itself (its robot, estimates and stds)."""
-
-    groups: tuple[str, ...]
-    mean_mm: float
-    std_mm: float
-    max_mm: float
-    train_rms_mm: float
-    fitted: int
-    converged: bool
-    seconds: float
-    not_determined: tuple[str, ...] = ()
-    calibration: TreeCalibration | None = None
-
-
-def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Training and test row indices (sorted): `test` rows drawn at random by `seed`."""
-    if not 0 < test < n:
-        raise ValueError(f"test must be between 1 and {n - 1} rows, got {test}")
-    perm = np.random.default_rng(seed).permutation(n)
-    return np.sort(perm[test:]), np.sort(perm[:test])
-
-
-def validate_tree(
-    robot: TreeRobot,
-    train: MarkerData,
-    test: MarkerData,
-    groups: tuple[str, ...] | None = None,
-    *,
-    progress=None,
-    priors: dict[str, PriorSpec] | None = None,
-) -> list[Stage]:
-    """Calibrate on `train` adding the parameter `groups` in turn and measure the 3-D
-    marker error on `test`. Each stage is a calibration of its groups from `robot`'s
-    values, as a user would run it (`identify --params`); starting from the previous
-    stage's estimate instead lands in a long valley of the near-redundant geometry
-    that Levenberg–Marquardt does not leave within its step budget. `priors` as in
-    `calibrate_tree`, for the groups a stage fits."""
-    out: list[Stage] = []
-    groups = default_groups(robot) if groups is None else groups
-    for k in range(1, len(groups) + 1):
-        cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors)
-        e = marker_errors(cal.robot, test) * 1e3
-        out.append(
-            Stage(
-                groups=groups[:k],
-                mean_mm=float(e.mean()),
-                std_mm=float(e.std()),
-                max_mm=float(e.max()),
-                train_rms_mm=cal.rms_mm,
-                fitted=int(cal.fitted.sum()),
-                converged=cal.converged,
-                seconds=cal.seconds,
-                not_determined=cal.not_determined,
-                calibration=cal,
-            )
-        )
-        if progress is not None:
-            progress(out[-1])
-    return out

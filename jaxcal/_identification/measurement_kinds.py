@@ -34,8 +34,8 @@ from .._model.tree_statics import (
     marker_positions,
     tree_equilibrium,
 )
-from .elastogeometric import pivoted_subset
 from .parameter_groups import Parameter, get_vector, parameter_table, set_vector
+from .pivoting import pivoted_subset
 
 __all__ = ["KindComparison", "compare_measurement_kinds"]
 

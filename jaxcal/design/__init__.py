@@ -32,7 +32,6 @@ from ._optimise import (
     DesignProblem as DesignProblem,
     design_objective as design_objective,
     optimise_design as optimise_design,
-    rank_random_designs as rank_random_designs,
 )
 from ._plans import (
     PAPER_TABLE5_DEG as PAPER_TABLE5_DEG,
@@ -44,6 +43,7 @@ from ._plans import (
     random_designs as random_designs,
     structured_design as structured_design,
 )
+from ._reference import rank_random_designs as rank_random_designs
 from ._select import (
     SELECT_CRITERIA as SELECT_CRITERIA,
     Selection as Selection,

@@ -1,6 +1,7 @@
 """Design of calibration experiments (paper section 5): continuous optimisation of the
 measurement configurations (random and structured plans, the paper's Table 5: `design/_plans.py`;
-the approximate-design bound a design is measured against: `design/_bound.py`).
+the random designs a design is compared with: `design/_reference.py`; the approximate-design
+bound it is measured against: `design/_bound.py`).
 
 `optimise_design` optimises all `6·m` joint angles (with q2 groups: `5·m` angles plus one
 q2 per group) by BFGS (optimistix) with exact gradients from autodiff through the
@@ -24,13 +25,10 @@ parameters, all still estimated.
 `jaxcal evaluate` uses. `model="linear"` (eq. 5, compensator folded into joint 2) is
 ~100x cheaper per step and compiles in seconds, a different criterion for k2, Kc, s0.
 
-Constraints:
-
-- the box (joint limits ∩ experiment ranges) by a smooth reparameterisation
-  `q = lo + (hi − lo)·sigmoid(u)`, so it always holds;
-- the wrist-centre height and radius, and the q2 level gap, by a quadratic penalty on
-  violations of the constraint tightened by a small margin, in rounds of increasing
-  weight (each round warm-starts from the last; progress is printed per round).
+Constraints (`design/_penalised.py`): the box by a smooth reparameterisation, so it
+always holds; the wrist-centre height and radius and the q2 level gap by quadratic
+penalties, in rounds of increasing weight (each round warm-starts from the last; progress
+is printed per round).
 
 All starts run in one program (one after another on a CPU, in a `vmap` on an
 accelerator); with `pool=N` they are the best of N random feasible
@@ -46,177 +44,39 @@ import dataclasses
 import sys
 import time
 import warnings
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
-from jaxtyping import Array, Float
 
-from .._batching import batch_map
-from .._exported import exported
 from .._io import Dataset
 from .._robot import Robot
 from ._bound import DesignBound, design_bound, has_bound
-from ._constraints import constraint_values, design_bounds, design_loads
+from ._constraints import constraint_values, design_loads
 from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
+from ._penalised import (
+    GAP_MARGIN,
+    MARGIN,
+    WEIGHTS,
+    encode,
+    evaluate_batch,
+    minimise_batch,
+    settle,
+    warm_up,
+)
 from ._plans import level_separation, random_designs
-from ._problem import DesignProblem, design_objective, log_value, problem_criteria
-from ._task import task_shares, task_weight
+from ._problem import DesignProblem, check_x64, design_objective, resolve_levels
+from ._reference import pool_values, problem_task_weight
+from ._task import task_shares
 
 __all__ = [
     "Design",
     "DesignProblem",
     "design_objective",
     "optimise_design",
-    "rank_random_designs",
 ]
-
-# Wrist-constraint margin (m) of the penalised problem: the optimum of a quadratic
-# penalty violates the constraint by O(gradient/weight); optimising against a
-# constraint tightened by 2 mm leaves the final design strictly inside.
-_MARGIN = 2e-3
-_LENGTH = 0.01  # m: a 1 cm violation costs `weight` in the log-criterion
-_WEIGHTS = (1.0, 1e2, 1e4)
-_ANGLE = np.deg2rad(1.0)  # a 1° violation of the level gap costs `weight`
-_GAP_MARGIN = np.deg2rad(0.2)
-
-
-def _bounds(problem: DesignProblem, dtype):
-    lo, hi = design_bounds(problem.robot)
-    return lo.astype(dtype), hi.astype(dtype)
-
-
-def _group_q2(problem: DesignProblem, v) -> Float[Array, " groups"]:
-    # The groups' q2 (rad): free ones from their variable, pinned ones constant (their
-    # variable is carried but unused, so every problem has one variable per group).
-    lo, hi = _bounds(problem, v.dtype)
-    q2 = lo[1] + (hi[1] - lo[1]) * jax.nn.sigmoid(v)
-    pins = problem.q2_levels_deg
-    if pins is None:
-        return q2
-    pinned = np.array([p is not None for p in pins])
-    value = np.deg2rad([0.0 if p is None else p for p in pins])
-    return jnp.where(pinned, jnp.asarray(value, v.dtype), q2)
-
-
-def _decode(problem: DesignProblem, z) -> Float[Array, "m 6"]:
-    u, v = z
-    lo, hi = _bounds(problem, u.dtype)
-    q = lo + (hi - lo) * jax.nn.sigmoid(u)
-    g = problem.group_index
-    if g is not None:
-        q = q.at[:, 1].set(_group_q2(problem, v)[jnp.asarray(g)])
-    return q
-
-
-def _encode(problem: DesignProblem, q: np.ndarray) -> tuple[Array, Array]:
-    # Host-side inverse of `_decode` for a batch `(k, m, 6)` of starting designs (numpy:
-    # nothing to compile).
-    lo, hi = (np.asarray(b) for b in design_bounds(problem.robot))
-    t = np.clip((q - lo) / (hi - lo), 1e-6, 1 - 1e-6)
-    u = np.log(t) - np.log1p(-t)
-    g = problem.group_index
-    if g is None:
-        v = np.zeros((q.shape[0], 0))
-    else:
-        gi = np.asarray(g)
-        v = np.stack([u[:, gi == k, 1].mean(axis=1) for k in range(problem.n_groups)], 1)
-    return jnp.asarray(u), jnp.asarray(v)
-
-
-def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
-    # Per pair of q2 groups: how far (rad) they are closer than the level gap (≤ 0: ok).
-    G = problem.n_groups
-    if problem.group_index is None or G < 2 or problem.level_gap_deg <= 0:
-        return jnp.zeros((0,), v.dtype)
-    q2 = _group_q2(problem, v)
-    i, j = np.triu_indices(G, 1)
-    return np.deg2rad(problem.level_gap_deg) - jnp.abs(q2[i] - q2[j])
-
-
-def _penalised(z, args):
-    problem, weight = args
-    q = _decode(problem, z)
-    # Without the rank test's eigenvalue iteration, a sequential loop that was most of a
-    # step's cost on a GPU (benchmarks/README.md); a step towards a singular design
-    # already meets a criterion growing without bound. Every start's result is
-    # evaluated with it (`_evaluate_batch`).
-    c = problem_criteria(problem, q, rank_test=False)
-    viol = constraint_values(problem.robot, q)[:, 1:] + _MARGIN
-    pen = jnp.sum((jax.nn.relu(viol) / _LENGTH) ** 2)
-    gap = _gap_violation(problem, z[1]) + _GAP_MARGIN
-    pen = pen + jnp.sum((jax.nn.relu(gap) / _ANGLE) ** 2)
-    return log_value(problem, c) + weight * pen
-
-
-@exported
-@eqx.filter_jit
-def _minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: float):
-    # One penalty round for all starts. The criteria at the results are evaluated by a
-    # separate program (`_evaluate_batch`), compiled while this one compiles.
-    solver = optx.BFGS(rtol=rtol, atol=rtol)
-
-    def one(z):
-        sol = optx.minimise(
-            _penalised, solver, z, args=(problem, weight), max_steps=max_steps, throw=False
-        )
-        return sol.value, sol.stats["num_steps"]
-
-    # On a CPU one start after another (cold `jaxcal design --configs 12`: trace 7.4 ->
-    # 4.5 s, rounds 9.9 -> 8.0 s against a vmap; benchmarks/README.md).
-    return batch_map(one, z0)
-
-
-@exported
-@eqx.filter_jit
-def _evaluate_batch(problem: DesignProblem, z):
-    # What the host needs to pick the best start: decoded angles, criteria, exact
-    # constraint values and the level-gap violation.
-    def one(z):
-        q = _decode(problem, z)
-        return (
-            q,
-            problem_criteria(problem, q),
-            constraint_values(problem.robot, q),
-            jnp.max(_gap_violation(problem, z[1]), initial=-jnp.inf),
-        )
-
-    return jax.vmap(one)(z)
-
-
-_WARMED: set = set()
-
-
-def _warm_up(problem: DesignProblem, z, bound: dict | None) -> list[Future]:
-    # Compile the programs needed after the BFGS rounds (the evaluation of the starts
-    # and the bound) on a worker thread while the main thread traces and compiles BFGS:
-    # XLA compiles on one core, so on two or more cores these come for free (cold
-    # `jaxcal design --configs 12`: see benchmarks/README.md). The inputs have the
-    # shapes of the real calls; a failure here is raised again by the real call.
-    leaves, treedef = jax.tree.flatten((problem, z, bound))
-    key = (treedef, tuple(np.shape(x) if eqx.is_array(x) else x for x in leaves))
-    try:
-        if key in _WARMED:
-            return []  # compiled by an earlier call in this process: nothing to overlap
-        _WARMED.add(key)
-    except TypeError:
-        pass  # an unhashable setting: warm up every time
-    pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcal-design-warmup")
-    futures = [pool.submit(_evaluate_batch, problem, z)]
-    if bound is not None:
-        futures.append(pool.submit(design_bound, problem, **bound))
-    pool.shutdown(wait=False)
-    return futures
-
-
-def _settle(futures: list[Future]) -> None:
-    # The real calls follow; a warm-up's own error (if any) is theirs to raise.
-    for f in futures:
-        f.exception()
 
 
 @dataclass(frozen=True)
@@ -287,28 +147,6 @@ class Design:
 _constraints_jit = eqx.filter_jit(constraint_values)
 
 
-def _check_x64(robot: Robot) -> None:
-    if robot.compliance.dtype != jnp.float64:
-        raise ValueError(
-            "design needs float64: call jax.config.update('jax_enable_x64', True) before "
-            "loading the robot"
-        )
-
-
-def _task_information(robot, task: Dataset, loads: str, include_k1, model) -> Array:
-    # The task's W over a design problem's parameters: k1 among them as `DesignProblem`
-    # decides (`include_k1`, default: loads that are not all vertical).
-    k1 = loads != "vertical" if include_k1 is None else include_k1
-    return jnp.asarray(task_weight(robot, task, k1, model or "full"))
-
-
-@exported
-@eqx.filter_jit
-def pool_values(problem: DesignProblem, q):
-    # The criterion of a batch of designs (one compiled program per problem and batch).
-    return jax.vmap(lambda a: problem_criteria(problem, a).value(problem.criterion))(q)
-
-
 def optimise_design(
     robot: Robot,
     m: int = 12,
@@ -374,7 +212,7 @@ def optimise_design(
 
     Returns the best feasible `Design` over the starts (`feasible=False` if none is).
     """
-    _check_x64(robot)
+    check_x64(robot)
     t0 = time.perf_counter()
     parameters, listed = resolve_parameters(robot, parameters)
     if listed is not None:
@@ -387,7 +225,7 @@ def optimise_design(
             raise ValueError("criterion='task' weighs the parameters by the task: no focus")
         # The task says what matters: every physical parameter, weighed by its effect there.
         parameters = "physical"
-        W = _task_information(robot, task, loads, None, model)
+        W = problem_task_weight(robot, task, loads, None, model)
     elif task is not None:
         raise ValueError("task= goes with criterion='task'")
     # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
@@ -431,19 +269,19 @@ def optimise_design(
             m,
             seed,
             groups=g,
-            margin=_MARGIN,
-            level_gap_deg=problem.level_gap_deg + np.rad2deg(_GAP_MARGIN),
+            margin=MARGIN,
+            level_gap_deg=problem.level_gap_deg + np.rad2deg(GAP_MARGIN),
             q2_levels_deg=pins,
         )
-    z = _encode(problem, q0)
+    z = encode(problem, q0)
     use_bound = bound_pool > 0 and has_bound(problem)
-    warm = _warm_up(problem, z, dict(n=bound_pool, seed=seed, include=q0[0]) if use_bound else None)
+    warm = warm_up(problem, z, dict(n=bound_pool, seed=seed, include=q0[0]) if use_bound else None)
     history = []
     best, crits, q = 0, None, None
-    for r, w in enumerate(_WEIGHTS):
-        z, steps = _minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
-        _settle(warm[:1])
-        q, crits, cv, gv = _evaluate_batch(problem, z)
+    for r, w in enumerate(WEIGHTS):
+        z, steps = minimise_batch(problem, z, jnp.asarray(w), max_steps, rtol)
+        settle(warm[:1])
+        q, crits, cv, gv = evaluate_batch(problem, z)
         val, cv = np.asarray(crits.value(criterion)), np.asarray(cv)
         viol = np.maximum(cv.max(axis=(1, 2)), np.asarray(gv))
         feas = (viol <= 1e-9) & np.isfinite(val)
@@ -452,7 +290,7 @@ def optimise_design(
         history.append(float(pick[best]))
         if progress:
             print(
-                f"design round {r + 1}/{len(_WEIGHTS)}: best feasible {criterion} = "
+                f"design round {r + 1}/{len(WEIGHTS)}: best feasible {criterion} = "
                 f"{pick[best]:.6g} ({int(feas.sum())}/{len(feas)} starts feasible, "
                 f"≤{int(np.max(steps))} BFGS steps, {time.perf_counter() - t0:.1f} s)",
                 file=sys.stderr,
@@ -476,7 +314,7 @@ def optimise_design(
         cvb = np.append(cvb.ravel(), gap_viol)
     bound = None
     if use_bound:
-        _settle(warm)
+        settle(warm)
         bound = design_bound(problem, n=bound_pool, seed=seed, include=qb)
         if progress:
             print(
@@ -505,28 +343,6 @@ def optimise_design(
     )
 
 
-def resolve_levels(
-    problem: DesignProblem, q2_levels: str | tuple[float | None, ...]
-) -> tuple[float | None, ...] | None:
-    """The fixed q2 levels (deg, `None` = optimised) of `q2_levels` (`"span"`, `"free"`
-    or one entry per group) for `problem`'s groups; `None` when nothing is fixed."""
-    G = problem.n_groups
-    if isinstance(q2_levels, str):
-        if q2_levels not in ("span", "free"):
-            raise ValueError(
-                f"q2_levels must be 'span', 'free' or one value per group, got {q2_levels!r}"
-            )
-        if q2_levels == "free" or G < 2:
-            return None
-        # Rounded: the box ends in deg are whole numbers up to the rad round trip.
-        lo, hi = (
-            round(float(np.degrees(np.asarray(b)[1])), 9) for b in design_bounds(problem.robot)
-        )
-        return (lo, *([None] * (G - 2)), hi)
-    levels = tuple(None if v is None else float(v) for v in q2_levels)
-    return None if all(v is None for v in levels) else levels
-
-
 def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
     # One parameter holding most of the trace: the design spends itself on a parameter
     # it cannot determine (typically Kc in the physical set).
@@ -544,45 +360,3 @@ def _warn_dominant(c: DesignCriteria, criterion: str, parameters: str) -> None:
             "determine it; consider --parameters aggregated or more configurations",
             stacklevel=3,
         )
-
-
-def rank_random_designs(
-    robot: Robot,
-    n: int = 200,
-    m: int = 12,
-    *,
-    seed: int = 0,
-    groups: tuple[int, ...] | None = None,
-    level_gap_deg: float = 20.0,
-    q2_levels: str | tuple[float | None, ...] = "free",
-    **problem,
-) -> tuple[np.ndarray, np.ndarray]:
-    """`n` random feasible designs of `m` configurations for a design problem (default:
-    the default problem, 3 q2 groups at least `level_gap_deg` apart, `q2_levels` as in
-    `optimise_design` but all random by default), sorted by their criterion, best
-    first: `(n, m, 6)` rad and the `(n,)` values. `problem`: further `DesignProblem`
-    settings (`parameters`, `criterion`, `model`, ...; for `criterion="task"`, `task`
-    is the task's rows as for `optimise_design`). The reference designs a design is
-    compared with (the best, the median)."""
-    _check_x64(robot)
-    parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
-    if listed is not None:
-        problem["focus"] = listed
-    if isinstance(problem.get("task"), Dataset):
-        problem["task"] = _task_information(
-            robot,
-            problem["task"],
-            problem.get("loads", "vertical"),
-            problem.get("include_k1"),
-            problem.get("model"),
-        )
-    P = DesignProblem(
-        robot, m, parameters=parameters, groups=groups, level_gap_deg=level_gap_deg, **problem
-    )
-    pins = resolve_levels(P, q2_levels)
-    q = random_designs(
-        robot, n, m, seed, groups=P.group_index, level_gap_deg=level_gap_deg, q2_levels_deg=pins
-    )
-    v = np.asarray(pool_values(P, jnp.asarray(q)))
-    order = np.argsort(np.where(np.isfinite(v), v, np.inf), kind="stable")
-    return q[order], v[order]

@@ -24,7 +24,7 @@ from ._criteria import (
     select_parameters,
 )
 
-__all__ = ["DesignProblem", "design_objective"]
+__all__ = ["DesignProblem", "design_objective", "check_x64", "resolve_levels"]
 
 
 def _plain_levels(levels) -> tuple[float | None, ...] | None:
@@ -217,3 +217,33 @@ def design_objective(problem: DesignProblem, q: Float[Array, "m 6"]) -> Float[Ar
     (not logged).
     Pure JAX; differentiable with respect to `q`."""
     return problem_criteria(problem, q).value(problem.criterion)
+
+
+def check_x64(robot: Robot) -> None:
+    if robot.compliance.dtype != jnp.float64:
+        raise ValueError(
+            "design needs float64: call jax.config.update('jax_enable_x64', True) before "
+            "loading the robot"
+        )
+
+
+def resolve_levels(
+    problem: DesignProblem, q2_levels: str | tuple[float | None, ...]
+) -> tuple[float | None, ...] | None:
+    """The fixed q2 levels (deg, `None` = optimised) of `q2_levels` (`"span"`, `"free"`
+    or one entry per group) for `problem`'s groups; `None` when nothing is fixed."""
+    G = problem.n_groups
+    if isinstance(q2_levels, str):
+        if q2_levels not in ("span", "free"):
+            raise ValueError(
+                f"q2_levels must be 'span', 'free' or one value per group, got {q2_levels!r}"
+            )
+        if q2_levels == "free" or G < 2:
+            return None
+        # Rounded: the box ends in deg are whole numbers up to the rad round trip.
+        lo, hi = (
+            round(float(np.degrees(np.asarray(b)[1])), 9) for b in design_bounds(problem.robot)
+        )
+        return (lo, *([None] * (G - 2)), hi)
+    levels = tuple(None if v is None else float(v) for v in q2_levels)
+    return None if all(v is None for v in levels) else levels

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._identification.elastogeometric import fitted_parameters, observations, scaled_jacobian
+from .._identification.elastogeometric import observations, scaled_jacobian
 from .._identification.parameter_groups import (
     PriorSpec,
     default_groups,
     parameter_table,
     prior_stds,
 )
+from .._identification.pivoting import fitted_parameters
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from ._select import SELECT_CRITERIA, pool_bound, select_rows, subset_values

@@ -42,11 +42,9 @@ import time
 import numpy as np
 
 from .._identification.elastogeometric import (
-    PIVOT_RCOND,
     TreeCalibration,
     calibrate_tree,
     observations,
-    predicted_markers,
     scaled_jacobian,
 )
 from .._identification.parameter_groups import (
@@ -55,7 +53,9 @@ from .._identification.parameter_groups import (
     get_vector,
     parameter_table,
 )
+from .._identification.pivoting import PIVOT_RCOND
 from .._identification.result import Z95
+from .._identification.tree_validation import predicted_markers
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from ._heldout import press

@@ -18,9 +18,7 @@ from .._identification.elastogeometric import (
     JACOBIAN_RTOL as JACOBIAN_RTOL,
     LM_CHI2_TOL as LM_CHI2_TOL,
     observations as observations,
-    pivoted_subset as pivoted_subset,
     scaled_jacobian as scaled_jacobian,
-    split_rows as split_rows,
 )
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
 from .._identification.method import fit_jit as fit_jit
@@ -31,7 +29,9 @@ from .._identification.parameter_groups import (
     get_vector as get_vector,
     set_vector as set_vector,
 )
+from .._identification.pivoting import pivoted_subset as pivoted_subset
 from .._identification.result import make_result as make_result
+from .._identification.tree_validation import split_rows as split_rows
 from .._io import (
     OutputError as OutputError,
     atomic_file as atomic_file,
@@ -59,8 +59,8 @@ from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._path import compensate_rows as compensate_rows
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian
-from ..design._optimise import pool_values as pool_values
 from ..design._problem import problem_criteria as problem_criteria
+from ..design._reference import pool_values as pool_values
 from ..design._select import pool_bound as pool_bound
 from ..discrepancy._heldout import (
     LEVERAGE_MAX as LEVERAGE_MAX,
