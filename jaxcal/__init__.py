@@ -149,8 +149,8 @@ from ._model.spring_laws import (
     JointHardening as JointHardening,
     SpringLaw as SpringLaw,
 )
-from ._model.tree import (
-    TreeRobot as TreeRobot,
+from ._model.tree import TreeRobot as TreeRobot
+from ._model.tree_files import (
     tree_from_dict as tree_from_dict,
     tree_to_dict as tree_to_dict,
 )

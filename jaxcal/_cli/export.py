@@ -36,7 +36,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._io import atomic_file
     from .._model.robot_files import load_tree
-    from .._model.tree import tree_to_dict
+    from .._model.tree_files import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path
 
     out = Path(args.output)

@@ -47,7 +47,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._identification.parameter_groups import parse_groups
     from .._identification.result import relative_std
     from .._io import atomic_file
-    from .._model.tree import tree_to_dict
+    from .._model.tree_files import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path
 
     check_output_path(args.save_robot, "--save-robot")

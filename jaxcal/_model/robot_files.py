@@ -11,7 +11,8 @@ from importlib import resources
 from pathlib import Path
 
 from .quasi_serial import is_quasi_serial, tree_dict_from_quasi_serial
-from .tree import TreeRobot, tree_from_dict
+from .tree import TreeRobot
+from .tree_files import tree_from_dict
 from .urdf import load_urdf
 
 __all__ = ["TREE_PRESETS", "load_tree", "is_tree_file"]

@@ -73,7 +73,8 @@ import numpy as np
 from jaxtyping import Float
 
 from .._keys import check_keys
-from .tree import G, TreeRobot, tree_from_dict
+from .tree import G, TreeRobot
+from .tree_files import tree_from_dict
 
 __all__ = ["tree_dict_from_urdf", "load_urdf"]
 
