@@ -18,7 +18,6 @@ units of χ²: the expected ΔBIC between the two after measuring the rows is ab
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -30,6 +29,7 @@ from .._io import Dataset, configurations
 from .._model.equilibrium import measured_deflections, with_unloaded
 from ._report import DiscoveryReport
 from ._supermodel import SuperModel
+from ._t_optimal import greedy_t_rows, lack_of_fit
 
 __all__ = ["Discrimination", "discriminating_rows", "default_pool", "separating_configurations"]
 
@@ -97,13 +97,6 @@ def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray):
     return np.asarray(y), np.asarray(ok), np.asarray(J)
 
 
-def _lack_of_fit(d: np.ndarray, J: np.ndarray) -> float:
-    """‖d − J δ‖² at the least-squares δ (σ-weighted, flattened)."""
-    delta, *_ = np.linalg.lstsq(J, d, rcond=None)
-    r = d - J @ delta
-    return float(r @ r)
-
-
 def discriminating_rows(
     sm: SuperModel,
     data: Dataset,
@@ -130,31 +123,20 @@ def discriminating_rows(
     jac = sm.jacobian(np.stack([pa, pb]), np.stack([data.sigma, data.sigma]))
     Ja_d, Jb_d = jac[0][:, fa], jac[1][:, fb]
     y, ok, J = _model_and_jacobian(sm, pool, np.stack([pa, pb]))
-    d_pool = (y[0] - y[1]) / sig_p  # (m, 3)
-    Ja_p = J[0][..., fa] / sig_p[..., None]
-    Jb_p = J[1][..., fb] / sig_p[..., None]
     usable = ok[0] & ok[1]
-
-    def t_of(rows: list[int]) -> float:
-        d = np.concatenate([d_data, d_pool[rows].reshape(-1)])
-        JA = np.concatenate([Ja_d, Ja_p[rows].reshape(-1, Ja_p.shape[-1])])
-        JB = np.concatenate([Jb_d, Jb_p[rows].reshape(-1, Jb_p.shape[-1])])
-        return min(_lack_of_fit(d, JB), _lack_of_fit(-d, JA))
-
-    chosen: list[int] = []
-    for _ in range(min(k, int(usable.sum()))):
-        best, best_t = -1, -math.inf
-        for i in np.flatnonzero(usable):
-            if i in chosen:
-                continue
-            t = t_of([*chosen, int(i)])
-            if t > best_t:
-                best, best_t = int(i), t
-        chosen.append(best)
-    idx = np.asarray(chosen, int)
+    # Rows whose equilibria failed are never chosen; zeros keep them out of the sums.
+    d_pool = np.where(usable[:, None], (y[0] - y[1]) / sig_p, 0.0)  # (m, 3)
+    Ja_p = np.where(usable[:, None, None], J[0][..., fa] / sig_p[..., None], 0.0)
+    Jb_p = np.where(usable[:, None, None], J[1][..., fb] / sig_p[..., None], 0.0)
+    # B refitted to A's predictions, and A to B's: the data's rows and the chosen ones.
+    idx, t_before, t_after = greedy_t_rows(
+        (lack_of_fit(Jb_d, d_data, Jb_p, d_pool), lack_of_fit(Ja_d, -d_data, Ja_p, -d_pool)),
+        k,
+        usable,
+    )
     rows = Dataset(pool.q[idx], pool.force[idx], pool.moment[idx], None, pool.sigma[idx])
     diff = np.linalg.norm(d_pool[idx], axis=1)
-    return Discrimination(a, b, rows, idx, diff, t_of([]), t_of(chosen))
+    return Discrimination(a, b, rows, idx, diff, t_before, t_after)
 
 
 def separating_configurations(

@@ -16,13 +16,13 @@ the joint limits with every marker seen: check that the camera sees them).
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from .._identification.elastogeometric import TreeCalibration, scaled_jacobian
 from .._markers import MarkerData, random_plan
+from ._t_optimal import greedy_t_rows, lack_of_fit
 
 __all__ = ["TreeDiscrimination", "tree_pool", "discriminate_tree"]
 
@@ -77,35 +77,15 @@ def discriminate_tree(
     )
     delta_b = coef[len(F) :]
 
-    # Lack of fit from normal equations: the data's Gram matrix plus each pose's, so
-    # that a candidate pose costs one small solve, not a refit over every row.
-    def parts(y_cols, delta, x_cols):
+    # A's contribution refitted by the others and B, and B's (its size where B is
+    # true) by the others and A.
+    def direction(y_cols, delta, x_cols):
         yd, yp = Jd[:, y_cols] @ delta, Jp[..., y_cols] @ delta
-        Xd, Xp = Jd[:, x_cols], Jp[..., x_cols]
-        return (
-            (Xd.T @ Xd, Xd.T @ yd, float(yd @ yd)),
-            (np.einsum("nri,nrj->nij", Xp, Xp), np.einsum("nri,nr->ni", Xp, yp), np.sum(yp**2, 1)),
-        )
+        return lack_of_fit(Jd[:, x_cols], yd, Jp[..., x_cols], yp)
 
-    models = (parts(ia, delta_a, np.r_[F, ib]), parts(ib, delta_b, np.r_[F, ia]))
-
-    def t_of(rows: list[int]) -> float:
-        out = math.inf
-        for (G, h, s0), (Gp, hp, sp) in models:
-            G1, h1 = G + Gp[rows].sum(0), h + hp[rows].sum(0)
-            coef, *_ = np.linalg.lstsq(G1, h1, rcond=None)
-            out = min(out, s0 + float(sp[rows].sum()) - float(h1 @ coef))
-        return out
-
-    chosen: list[int] = []
-    for _ in range(min(k, len(pool))):
-        best, best_t = -1, -math.inf
-        for i in range(len(pool)):
-            if i in chosen:
-                continue
-            t = t_of([*chosen, i])
-            if t > best_t:
-                best, best_t = i, t
-        chosen.append(best)
-    idx = np.asarray(chosen, int)
-    return TreeDiscrimination(la, lb, pool.subset(idx), idx, t_of([]), t_of(chosen))
+    idx, t_before, t_after = greedy_t_rows(
+        (direction(ia, delta_a, np.r_[F, ib]), direction(ib, delta_b, np.r_[F, ia])),
+        k,
+        np.ones(len(pool), bool),
+    )
+    return TreeDiscrimination(la, lb, pool.subset(idx), idx, t_before, t_after)

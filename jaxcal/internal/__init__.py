@@ -74,6 +74,10 @@ from ..discrepancy._screening import (
     preload_scan as preload_scan,
 )
 from ..discrepancy._supermodel import BatchFit as BatchFit
+from ..discrepancy._t_optimal import (
+    greedy_t_rows as greedy_t_rows,
+    lack_of_fit as lack_of_fit,
+)
 from ..montecarlo._chunk import make_chunk_fn as make_chunk_fn
 from ..montecarlo._methods import TrialFit as TrialFit
 from ..montecarlo._noise import (
