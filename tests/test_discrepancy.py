@@ -29,7 +29,7 @@ from jaxcal import (
     TrackerRotation,
     default_candidates,
 )
-from jaxcal.internal import THETA_REF, URAD, chi2_sf, press
+from jaxcal.internal import THETA_REF, URAD, chi2_sf, greedy_t_rows, lack_of_fit, press
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -158,6 +158,33 @@ def test_press_equals_refitting_without_each_group():
         keep = rows != g
         b, *_ = np.linalg.lstsq(J[keep], y[keep], rcond=None)
         np.testing.assert_allclose(loo[~keep], (y - J @ b)[~keep], rtol=1e-10, atol=1e-12)
+
+
+def test_t_criterion_equals_refitting_on_the_chosen_rows():
+    # The normal equations of `lack_of_fit` against a refit by lstsq over the stacked
+    # rows, with columns a million times apart in scale (user units: µrad/(N·m) beside
+    # N/m); the greedy first pick against the best single row by brute force.
+    rng = np.random.default_rng(5)
+    c = np.array([1e-3, 1.0, 1e3, 1e6])
+    Xd, yd = rng.normal(size=(30, 4)) * c, rng.normal(size=30)
+    Xp, yp = rng.normal(size=(12, 3, 4)) * c, rng.normal(size=(12, 3))
+
+    def refit(X, y, rows):
+        X = np.concatenate([X, Xp[rows].reshape(-1, 4)])
+        y = np.concatenate([y, yp[rows].reshape(-1)])
+        beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        return float(np.sum((y - X @ beta) ** 2))
+
+    lof = lack_of_fit(Xd, yd, Xp, yp)
+    for rows in ([], [3], [0, 7, 11]):
+        assert lof.value(rows) == pytest.approx(refit(Xd, yd, rows), rel=1e-9)
+    other = lack_of_fit(Xd, -yd, Xp, -yp)  # the same lack of fit, sign flipped
+    usable = np.ones(12, bool)
+    usable[4] = False
+    idx, before, after = greedy_t_rows((lof, other), 1, usable)
+    best = max((i for i in range(12) if usable[i]), key=lambda i: refit(Xd, yd, [i]))
+    assert list(idx) == [best] and before == pytest.approx(refit(Xd, yd, []), rel=1e-9)
+    assert after == pytest.approx(refit(Xd, yd, [best]), rel=1e-9) and after >= before
 
 
 # -- the seeds study ----------------------------------------------------------------------
@@ -296,9 +323,11 @@ def test_cli_discover_plot_on_a_full_disk_keeps_the_report(
 
 
 def test_discover_rejects_float32_and_missing_deflections(robot, example):
+    f32 = jax.tree.map(lambda x: x.astype(jnp.float32) if x.dtype == jnp.float64 else x, example)
+    with pytest.raises(ValueError, match="the discrepancy workflow needs float64"):
+        jaxcal.discover(robot, f32)
     with pytest.raises(ValueError, match="no deflections"):
-        jaxcal_discover = __import__("jaxcal.discrepancy._discover", fromlist=["discover"]).discover
-        jaxcal_discover(robot, example.with_deflection(None))
+        jaxcal.discover(robot, example.with_deflection(None))
 
 
 @pytest.mark.parametrize("case", EFFECTS)

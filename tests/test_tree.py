@@ -229,6 +229,12 @@ def test_angle_beyond_limits_is_named(tmp_path, justin):
         jaxcal.read_markers(path, justin)
 
 
+def test_float32_robot_is_refused(justin, data):
+    r32 = jax.tree.map(lambda x: x.astype(jnp.float32) if x.dtype == jnp.float64 else x, justin)
+    with pytest.raises(ValueError, match="calibration needs float64"):
+        jaxcal.calibrate_tree(r32, data.subset(np.arange(10)), ("frames",))
+
+
 def test_pivoted_subset_drops_exact_redundancy():
     rng = np.random.default_rng(0)
     J = rng.normal(size=(50, 4))

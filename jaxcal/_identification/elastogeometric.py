@@ -39,6 +39,7 @@ from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._model.tree_statics import predict_markers
+from .._precision import require_float64
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
 from .parameter_groups import (
@@ -249,6 +250,7 @@ def calibrate_tree(
     with a prior is fitted (unless held) whether or not the data determine it. Never
     raises on a failed fit: see `converged` and `message`.
     """
+    require_float64("calibration", robot.compliance)
     if not threshold > 0:
         raise ValueError(f"threshold must be positive, got {threshold}")
     cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)

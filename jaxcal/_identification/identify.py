@@ -16,7 +16,6 @@ import warnings
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .._exported import exported
@@ -25,6 +24,7 @@ from .._linalg.covariance import dead_columns, null_space, nullity
 from .._model.linear import linear_deflection
 from .._parameters import get_parameters, set_parameters
 from .._plausibility import check_loaded, duplicate_rows
+from .._precision import require_float64
 from .._robot import Robot
 from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
@@ -49,12 +49,7 @@ def check_inputs(robot: Robot, data: Dataset) -> None:
     """Raise `ValueError` naming the problem: float64 off, no deflections, non-finite
     values, non-positive σ, no load in any row, joint angles outside the robot's
     limits."""
-    x64 = jax.config.jax_enable_x64  # pyright: ignore[reportAttributeAccessIssue]
-    if not x64 or jnp.zeros(()).dtype != jnp.float64:
-        raise ValueError(
-            "identification needs float64: call jax.config.update('jax_enable_x64', True) "
-            "before using jaxcal (deflections are µm on metres)"
-        )
+    require_float64("identification", robot.compliance, data.q)
     if data.deflection is None:
         raise ValueError("data has no measured deflections (columns dx_mm, dy_mm, dz_mm)")
     for name in ("q", "force", "moment", "deflection", "sigma"):

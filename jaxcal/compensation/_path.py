@@ -22,6 +22,7 @@ from jaxtyping import Array, Float
 from .._batching import chunk_width, map_in_chunks
 from .._identification.calibration import Calibration
 from .._io import Dataset, atomic_file, input_cells, read_dataset
+from .._precision import require_float64
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
@@ -148,10 +149,7 @@ def compensate(
     Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
     compensated are not raised but refused (`Compensation.refused()`).
     """
-    if jnp.zeros(()).dtype != jnp.float64:
-        raise ValueError(
-            "compensation needs float64: call jax.config.update('jax_enable_x64', True) first"
-        )
+    require_float64("compensation")
     if not (max_cond > 1):
         raise ValueError(f"max_cond must be > 1, got {max_cond}")
     if not (tol > 0) or not (length_scale > 0):

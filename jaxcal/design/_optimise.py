@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._io import Dataset
+from .._precision import require_float64
 from .._robot import Robot
 from ._bound import DesignBound, design_bound, has_bound
 from ._constraints import constraint_values, design_loads
@@ -67,7 +68,7 @@ from ._penalised import (
     warm_up,
 )
 from ._plans import level_separation, random_designs
-from ._problem import DesignProblem, check_x64, design_objective, resolve_levels
+from ._problem import DesignProblem, design_objective, resolve_levels
 from ._reference import pool_values, problem_task_weight
 from ._task import task_shares
 
@@ -212,7 +213,7 @@ def optimise_design(
 
     Returns the best feasible `Design` over the starts (`feasible=False` if none is).
     """
-    check_x64(robot)
+    require_float64("design", robot.compliance)
     t0 = time.perf_counter()
     parameters, listed = resolve_parameters(robot, parameters)
     if listed is not None:

@@ -24,7 +24,7 @@ from ._criteria import (
     select_parameters,
 )
 
-__all__ = ["DesignProblem", "design_objective", "check_x64", "resolve_levels"]
+__all__ = ["DesignProblem", "design_objective", "resolve_levels"]
 
 
 def _plain_levels(levels) -> tuple[float | None, ...] | None:
@@ -217,14 +217,6 @@ def design_objective(problem: DesignProblem, q: Float[Array, "m 6"]) -> Float[Ar
     (not logged).
     Pure JAX; differentiable with respect to `q`."""
     return problem_criteria(problem, q).value(problem.criterion)
-
-
-def check_x64(robot: Robot) -> None:
-    if robot.compliance.dtype != jnp.float64:
-        raise ValueError(
-            "design needs float64: call jax.config.update('jax_enable_x64', True) before "
-            "loading the robot"
-        )
 
 
 def resolve_levels(

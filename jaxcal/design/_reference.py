@@ -12,10 +12,11 @@ from jaxtyping import Array
 
 from .._exported import exported
 from .._io import Dataset
+from .._precision import require_float64
 from .._robot import Robot
 from ._criteria import resolve_parameters
 from ._plans import random_designs
-from ._problem import DesignProblem, check_x64, problem_criteria, resolve_levels
+from ._problem import DesignProblem, problem_criteria, resolve_levels
 from ._task import task_weight
 
 __all__ = ["problem_task_weight", "pool_values", "rank_random_designs"]
@@ -53,7 +54,7 @@ def rank_random_designs(
     settings (`parameters`, `criterion`, `model`, ...; for `criterion="task"`, `task`
     is the task's rows as for `optimise_design`). The reference designs a design is
     compared with (the best, the median)."""
-    check_x64(robot)
+    require_float64("design", robot.compliance)
     parameters, listed = resolve_parameters(robot, problem.pop("parameters", "aggregated"))
     if listed is not None:
         problem["focus"] = listed

@@ -45,12 +45,12 @@ from __future__ import annotations
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._io import Dataset
 from .._model.candidates import Candidate, default_candidates
 from .._plausibility import check_loaded
+from .._precision import require_float64
 from .._robot import Robot
 from ._discriminate import discriminating_rows, separating_configurations
 from ._heldout import heldout_residuals
@@ -102,11 +102,7 @@ def discover_batch(
     that many rows of `pool` (default: random feasible ones) that would
     (`_discriminate.py`).
     """
-    if jnp.asarray(data.q).dtype != jnp.float64:
-        raise ValueError(
-            "the discrepancy workflow needs float64: "
-            'jax.config.update("jax_enable_x64", True) before loading data'
-        )
+    require_float64("the discrepancy workflow", data.q)
     deflections = np.asarray(deflections, float)
     if deflections.ndim != 3 or deflections.shape[1:] != (len(data), 3):
         raise ValueError(

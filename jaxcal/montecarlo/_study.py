@@ -40,6 +40,7 @@ from jaxtyping import Array, Float
 from .._identification.identify import METHODS
 from .._io import Dataset
 from .._model.simulate import DeflectionError, model_deflections
+from .._precision import require_float64
 from .._robot import Robot
 from ._chunk import REASONS, ChunkOut as _ChunkOut, make_chunk_fn as _make_chunk_fn
 from ._methods import TrialFit, trial_fit
@@ -58,14 +59,6 @@ __all__ = [
 # Chunk sizes (trials) by method: large enough to amortise dispatch, small enough for
 # memory (linear: ~40 floats per trial; nonlinear: Jacobians of every Newton step).
 _DEFAULT_CHUNK = {"linear": 1 << 16, "two-step": 1 << 10, "nonlinear": 256}
-
-
-def _check_x64() -> None:
-    if not jax.config.read("jax_enable_x64"):
-        raise ValueError(
-            "Monte-Carlo studies need float64: call "
-            "jax.config.update('jax_enable_x64', True) before using jaxcal"
-        )
 
 
 def _gather(x: Array) -> np.ndarray:
@@ -154,7 +147,7 @@ def monte_carlo(
 
 
 def check_options(trials, student_t, histogram_bins) -> None:
-    _check_x64()
+    require_float64("a Monte-Carlo study")
     if isinstance(trials, bool) or not isinstance(trials, int | np.integer) or trials < 1:
         raise ValueError(f"trials must be a positive integer, got {trials!r}")
     if student_t is not None and not student_t > 2:
@@ -169,7 +162,7 @@ def check_options(trials, student_t, histogram_bins) -> None:
 def prepare_study(robot, design, method, free, clean, noise_std):
     """Validate, compute the noise-free deflections once (full model unless `clean`),
     and build the per-trial fit (which checks identifiability on the design)."""
-    _check_x64()
+    require_float64("a Monte-Carlo study")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     sigma = design.sigma if noise_std is None else jnp.full_like(design.sigma, noise_std)
