@@ -247,8 +247,8 @@ def _pool(text: str) -> int | str:
 def run_design(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
     from .._robot import load_robot
-    from ..design._criteria import resolve_parameters
     from ..design._optimise import optimise_design
+    from ..design._parameter_sets import resolve_parameters
 
     check_output_path(args.output, "-o")
     if isinstance(args.pool, str):

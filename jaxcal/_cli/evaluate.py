@@ -137,7 +137,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from .._robot import load_robot
     from ..design._bound import design_bound
     from ..design._constraints import CONSTRAINTS, constraint_values
-    from ..design._criteria import default_relative, design_criteria, resolve_parameters
+    from ..design._criteria import design_criteria
+    from ..design._parameter_sets import default_relative, resolve_parameters
 
     robot = load_robot(args.robot)
     data = read_dataset(args.design, robot, require_deflection=False, ignore_deflection=True)

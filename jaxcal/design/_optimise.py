@@ -56,7 +56,8 @@ from .._precision import require_float64
 from .._robot import Robot
 from ._bound import DesignBound, design_bound, has_bound
 from ._constraints import constraint_values, design_loads
-from ._criteria import DesignCriteria, design_parameter_names, resolve_parameters, share_of_trace
+from ._criteria import DesignCriteria, design_parameter_names, share_of_trace
+from ._parameter_sets import resolve_parameters
 from ._penalised import (
     GAP_MARGIN,
     MARGIN,

@@ -18,11 +18,10 @@ from ._criteria import (
     PARAMETER_SETS,
     DesignCriteria,
     criteria_from_observation,
-    default_relative,
     design_observation,
     design_parameter_names,
-    select_parameters,
 )
+from ._parameter_sets import default_relative, select_parameters
 
 __all__ = ["DesignProblem", "design_objective", "resolve_levels"]
 

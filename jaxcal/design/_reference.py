@@ -14,7 +14,7 @@ from .._exported import exported
 from .._io import Dataset
 from .._precision import require_float64
 from .._robot import Robot
-from ._criteria import resolve_parameters
+from ._parameter_sets import resolve_parameters
 from ._plans import random_designs
 from ._problem import DesignProblem, problem_criteria, resolve_levels
 from ._task import task_weight

@@ -11,7 +11,8 @@ import numpy as np
 
 from .._io import Dataset
 from .._robot import Robot
-from ._criteria import design_parameter_names, k1_identifiable
+from ._criteria import design_parameter_names
+from ._parameter_sets import k1_identifiable
 from ._select import Selection, pool_bound, select_rows, subset_values
 from ._task import observe_physical, task_weight
 

@@ -33,9 +33,9 @@ from ._criteria import (
     criteria_from_observation,
     design_parameter_names,
     host_criteria,
-    k1_identifiable,
     observe_jit,
 )
+from ._parameter_sets import k1_identifiable
 
 __all__ = [
     "TaskPrediction",
