@@ -250,7 +250,7 @@ def calibrate_tree(
     with a prior is fitted (unless held) whether or not the data determine it. Never
     raises on a failed fit: see `converged` and `message`.
     """
-    require_float64("calibration", robot.compliance)
+    require_float64("calibration", robot.compliance, np.asarray(data.q))
     if not threshold > 0:
         raise ValueError(f"threshold must be positive, got {threshold}")
     cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)

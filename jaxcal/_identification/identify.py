@@ -46,9 +46,9 @@ _FIX_PREFERENCE = ("s0_m", "Kc_N_per_m", "k1_urad_per_Nm")
 
 
 def check_inputs(robot: Robot, data: Dataset) -> None:
-    """Raise `ValueError` naming the problem: float64 off, no deflections, non-finite
-    values, non-positive σ, no load in any row, joint angles outside the robot's
-    limits."""
+    """Raise `ValueError` naming the problem: float64 off (or a float32 robot or data
+    set), no deflections, non-finite values, non-positive σ, no load in any row, joint
+    angles outside the robot's limits."""
     require_float64("identification", robot.compliance, data.q)
     if data.deflection is None:
         raise ValueError("data has no measured deflections (columns dx_mm, dy_mm, dz_mm)")

@@ -76,7 +76,6 @@ from .._keys import check_keys
 from .tree import G, TreeRobot
 from .tree_files import tree_from_dict
 from .urdf_joints import (
-    SIDECAR_JOINT_KEYS,
     SPRING_KEYS,
     joint_motions,
     slide_limits,
@@ -102,7 +101,6 @@ _SIDECAR: dict[str, tuple[str, ...]] = {
         "geometric_errors",
         "calibration",
     ),
-    "joints": SIDECAR_JOINT_KEYS,
     "markers": ("name", "link", "at_m"),
 }
 

@@ -149,7 +149,7 @@ def compensate(
     Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
     compensated are not raised but refused (`Compensation.refused()`).
     """
-    require_float64("compensation")
+    require_float64("compensation", robot.compliance, path.q)
     if not (max_cond > 1):
         raise ValueError(f"max_cond must be > 1, got {max_cond}")
     if not (tol > 0) or not (length_scale > 0):

@@ -230,7 +230,8 @@ def optimise_design(
         W = problem_task_weight(robot, task, loads, None, model)
     elif task is not None:
         raise ValueError("task= goes with criterion='task'")
-    # The level gap only acts where there are q2 groups (`_gap_violation`, `random_designs`).
+    # The level gap only acts where there are q2 groups (the penalty of
+    # `design/_penalised.py`, `random_designs`).
     problem = DesignProblem(
         robot,
         m,

@@ -1,5 +1,6 @@
-"""A design problem (the settings of `optimise_design`) and its criterion as a pure JAX
-function of the joint angles (`design_objective`)."""
+"""A design problem (the settings of `optimise_design`), its criterion as a pure JAX
+function of the joint angles (`design_objective`), and its fixed q2 levels
+(`resolve_levels`)."""
 
 from __future__ import annotations
 

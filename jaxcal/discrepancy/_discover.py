@@ -102,7 +102,7 @@ def discover_batch(
     that many rows of `pool` (default: random feasible ones) that would
     (`_discriminate.py`).
     """
-    require_float64("the discrepancy workflow", data.q)
+    require_float64("the discrepancy workflow", robot.compliance, data.q)
     deflections = np.asarray(deflections, float)
     if deflections.ndim != 3 or deflections.shape[1:] != (len(data), 3):
         raise ValueError(

@@ -8,11 +8,12 @@ parameters `X` over the data's rows and the chosen new ones,
 
     T = min_δ ‖y − X δ‖².
 
-The rows maximise the smaller of the two directions, one at a time. The regression is
-kept as normal equations (the data's Gram matrix plus each candidate row's), so that a
-candidate costs one small solve instead of a refit over every row; the columns are
-scaled to unit norm first, which leaves `T` unchanged and keeps the Gram matrix as well
-conditioned as the columns allow.
+The rows maximise the smaller of the two directions, one at a time. The data's rows are
+reduced once to their QR factors (`X = Q R`): since `‖y − X δ‖² = ‖(I − QQᵀ) y‖² +
+‖Qᵀy − R δ‖²` for every δ, a candidate costs one least-squares solve of `R` stacked on
+its own rows, instead of a refit over every row, and is as accurate as that refit
+(normal equations square the condition number, and the criterion matters most where
+the two fits nearly agree: a small lack of fit left by nearly dependent columns).
 """
 
 from __future__ import annotations
@@ -27,39 +28,37 @@ __all__ = ["LackOfFit", "lack_of_fit", "greedy_t_rows"]
 
 
 class LackOfFit(NamedTuple):
-    """One direction of the criterion as normal equations: the data's `G = XᵀX` (q, q),
-    `h = Xᵀy` (q,), `s = ‖y‖²`, and each candidate row's own terms `Gp` (m, q, q), `hp`
-    (m, q), `sp` (m,)."""
+    """One direction of the criterion: the data's rows as `R` (k, q) and `z = Qᵀy` (k,)
+    with the part of `y` outside the columns' span, `s = ‖(I − QQᵀ) y‖²`, and the
+    candidate rows `Xp` (m, r, q), `yp` (m, r)."""
 
-    G: np.ndarray
-    h: np.ndarray
+    R: np.ndarray
+    z: np.ndarray
     s: float
-    Gp: np.ndarray
-    hp: np.ndarray
-    sp: np.ndarray
+    Xp: np.ndarray
+    yp: np.ndarray
 
     def value(self, rows: Sequence[int]) -> float:
         """`min_δ ‖y − X δ‖²` over the data's rows and the candidate `rows`."""
         rows = list(rows)
-        G, h = self.G + self.Gp[rows].sum(0), self.h + self.hp[rows].sum(0)
-        coef, *_ = np.linalg.lstsq(G, h, rcond=None)
-        return self.s + float(self.sp[rows].sum()) - float(h @ coef)
+        A = np.concatenate([self.R, self.Xp[rows].reshape(-1, self.R.shape[1])])
+        b = np.concatenate([self.z, self.yp[rows].reshape(-1)])
+        coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+        r = b - A @ coef
+        return self.s + float(r @ r)
 
 
 def lack_of_fit(Xd: np.ndarray, yd: np.ndarray, Xp: np.ndarray, yp: np.ndarray) -> LackOfFit:
     """The terms of one direction: `Xd` (N, q) and `yd` (N,) on the data's rows, `Xp`
-    (m, r, q) and `yp` (m, r) on the `m` candidate rows (`r` observations each)."""
+    (m, r, q) and `yp` (m, r) on the `m` candidate rows (`r` observations each). The
+    columns are scaled to unit norm (T does not change) so that the solves' rank
+    threshold compares like with like."""
     norm = np.sqrt(np.sum(Xd**2, axis=0) + np.sum(Xp**2, axis=(0, 1)))
     c = 1.0 / np.where(norm > 0, norm, 1.0)
-    Xd, Xp = Xd * c, Xp * c
-    return LackOfFit(
-        Xd.T @ Xd,
-        Xd.T @ yd,
-        float(yd @ yd),
-        np.einsum("nri,nrj->nij", Xp, Xp),
-        np.einsum("nri,nr->ni", Xp, yp),
-        np.sum(yp**2, axis=1),
-    )
+    Q, R = np.linalg.qr(Xd * c)
+    z = Q.T @ yd
+    out = yd - Q @ z
+    return LackOfFit(R, z, float(out @ out), Xp * c, yp)
 
 
 def greedy_t_rows(

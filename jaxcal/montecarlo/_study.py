@@ -162,7 +162,7 @@ def check_options(trials, student_t, histogram_bins) -> None:
 def prepare_study(robot, design, method, free, clean, noise_std):
     """Validate, compute the noise-free deflections once (full model unless `clean`),
     and build the per-trial fit (which checks identifiability on the design)."""
-    require_float64("a Monte-Carlo study")
+    require_float64("a Monte-Carlo study", robot.compliance, design.q)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     sigma = design.sigma if noise_std is None else jnp.full_like(design.sigma, noise_std)
