@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
 from jaxcal import RESULTS  # noqa: E402
-from jaxcal.compensation import compensate_row  # noqa: E402
+from jaxcal.compensation import compensate_row, landing_error  # noqa: E402
 
 FORCE_N = (0.0, 0.0, -3000.0)
 
@@ -74,13 +74,8 @@ def compensation_error(robot, fitted, q, force):
 
     def row(qt, f):
         c = compensate_row(fitted, qt, f)
-        qc = c.qc
-        zero = jnp.zeros(3, qt.dtype)
-        x_t = jaxcal.equilibrium(robot, qt, zero, zero)
-        x_c = jaxcal.equilibrium(robot, qc, f, zero)
-        target = jaxcal.forward(robot, qt, x_t[:6]).p_tool
-        landed = jaxcal.forward(robot, qc, x_c[:6]).p_tool
-        return landed - target, c.result == RESULTS.successful
+        e, landed = landing_error(robot, c.qc, qt, f)
+        return e, landed & (c.result == RESULTS.successful)
 
     e, ok = jax.vmap(row)(q, force)
     return jnp.sqrt(jnp.mean(jnp.sum(e**2, axis=1))), jnp.sum(~ok)

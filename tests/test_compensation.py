@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 
 import jaxcal
-from jaxcal.compensation import compensate, compensate_row, read_path
+from jaxcal.compensation import compensate, compensate_row, landing_error, read_path
 from jaxcal.internal.cli import main
 
 #: Process wrench of the tests: 3 kN force and a moment, base frame (N, N·m).
@@ -75,10 +75,16 @@ def test_on_target_to_1um(truth):
     cov = jnp.diag((0.01 * jaxcal.get_parameters(robot)) ** 2)
     comp = compensate(robot, path, cov)
     assert comp.ok.all(), comp.refused()
+    # What a simulation study measures (`landing_error`): the same, to round-off.
+    landed, ok = jax.jit(jax.vmap(lambda qc, qt: landing_error(robot, qc, qt, f, m)))(
+        comp.rows.qc, q
+    )
+    assert bool(jnp.all(ok))
     for i in range(20):
         p_t, R_t = loaded_tool_pose(robot, q[i], jnp.zeros(3), jnp.zeros(3))
         p_c, R_c = loaded_tool_pose(robot, comp.rows.qc[i], f, m)
         assert float(jnp.linalg.norm(p_c - p_t)) <= 1e-6
+        np.testing.assert_allclose(landed[i], p_c - p_t, rtol=0, atol=1e-12)
         # Orientation on target too (rotation angle of R_c R_tᵀ, rad).
         c = (jnp.trace(R_c @ R_t.T) - 1) / 2
         assert float(jnp.arccos(jnp.clip(c, -1, 1))) <= 1e-7

@@ -17,7 +17,7 @@ import pytest
 
 import jaxcal
 from jaxcal import DesignProblem, design_bound, design_criteria, design_observation, random_designs
-from jaxcal.compensation import compensate_row
+from jaxcal.compensation import compensate_row, landing_error
 from jaxcal.internal import pool_values, problem_criteria
 
 
@@ -404,10 +404,8 @@ def _compensation_error(robot, fitted, q, force):
     # and whether `fitted` compensated every row.
     def row(qt, f):
         c = compensate_row(fitted, qt, f)
-        zero = jnp.zeros(3, qt.dtype)
-        target = jaxcal.forward(robot, qt, jaxcal.equilibrium(robot, qt, zero, zero)[:6])
-        landed = jaxcal.forward(robot, c.qc, jaxcal.equilibrium(robot, c.qc, f, zero)[:6])
-        return landed.p_tool - target.p_tool, c.result == jaxcal.RESULTS.successful
+        e, landed = landing_error(robot, c.qc, qt, f)
+        return e, landed & (c.result == jaxcal.RESULTS.successful)
 
     e, ok = jax.vmap(row)(q, force)
     return jnp.sqrt(jnp.mean(jnp.sum(e**2, axis=1))), jnp.all(ok)

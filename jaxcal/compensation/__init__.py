@@ -12,5 +12,6 @@ from ._plot import plot_compensation as plot_compensation
 from ._solve import (
     RowCompensation as RowCompensation,
     compensate_row as compensate_row,
+    landing_error as landing_error,
     pose_error as pose_error,
 )
