@@ -101,11 +101,11 @@ def landing_error(
     `jax.vmap` over a path. Does not raise.
     """
     dtype = jnp.result_type(q, robot.compliance)
-    zero = jnp.zeros(3, dtype)
-    target = solve_equilibrium(robot, jnp.asarray(q, dtype), zero, None)
-    landed = solve_equilibrium(robot, jnp.asarray(qc, dtype), jnp.asarray(force, dtype), moment)
-    p_t, _ = tool_pose(robot, jnp.asarray(q, dtype), target.x)
-    p_c, _ = tool_pose(robot, jnp.asarray(qc, dtype), landed.x)
+    q, qc = jnp.asarray(q, dtype), jnp.asarray(qc, dtype)
+    target = solve_equilibrium(robot, q, jnp.zeros(3, dtype), None)
+    landed = solve_equilibrium(robot, qc, jnp.asarray(force, dtype), moment)
+    p_t, _ = tool_pose(robot, q, target.x)
+    p_c, _ = tool_pose(robot, qc, landed.x)
     ok = (target.result == RESULTS.successful) & (landed.result == RESULTS.successful)
     return p_c - p_t, ok
 

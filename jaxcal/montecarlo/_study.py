@@ -147,7 +147,7 @@ def monte_carlo(
 
 
 def check_options(trials, student_t, histogram_bins) -> None:
-    require_float64("a Monte-Carlo study")
+    # float64 is checked by `prepare_study`, which every caller runs next.
     if isinstance(trials, bool) or not isinstance(trials, int | np.integer) or trials < 1:
         raise ValueError(f"trials must be a positive integer, got {trials!r}")
     if student_t is not None and not student_t > 2:
