@@ -134,14 +134,20 @@ def test_compensator_derivatives(fanuc):
     def spec_dp(kc, s0):
         return jaxcal.deflection(eqx.tree_at(lambda r: (r.Kc, r.s0), robot, (kc, s0)), q, f)
 
-    # One program gives the tree's deflection and its derivatives: the finite
-    # differences below call it four more times.
-    tree_both = jax.jit(jax.jacfwd(lambda *x: (tree_dp(*x),) * 2, argnums=(0, 1), has_aux=True))
+    # One program gives the tree's deflection and its derivatives, forward and reverse
+    # (a calibration's Jacobian transposes the same implicit solve, here formed on the
+    # robot's six springs): the finite differences below call it four more times.
+    @jax.jit
+    def tree_both(*x):
+        fwd, dp = jax.jacfwd(lambda *x: (tree_dp(*x),) * 2, argnums=(0, 1), has_aux=True)(*x)
+        return fwd, dp, jax.jacrev(tree_dp, argnums=(0, 1))(*x)
+
     x = (tree.laws[0].Kc, tree.laws[0].s0)
-    jt = tree_both(*x)[0]
+    jt, _, rev = tree_both(*x)
     js = jax.jit(jax.jacfwd(spec_dp, argnums=(0, 1)))(*x)
-    for a, b, h in zip(jt, js, (1e2, 1e-5), strict=True):
+    for a, b, r, h in zip(jt, js, rev, (1e2, 1e-5), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-7, atol=1e-18 / h)
+        np.testing.assert_allclose(r, a, rtol=1e-10, atol=1e-20 / h)
     # Central differences in each parameter: truncation O(h²), round-off O(ε·|Δp|/h).
     for i, h in ((0, 1e2), (1, 1e-5)):
         up, dn = list(x), list(x)

@@ -9,11 +9,16 @@ zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
 (`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
 `φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix (the springs are stiff against
 the load's own stiffness, so the iteration contracts fast); derivatives with respect
-to every parameter come from the implicit function theorem, whose linear system is
-solved by the same contraction (`_linalg/iterative.py`: a few Hessian-vector products
-instead of the 3r needed to form the matrix; on Agile Justin's 300 poses the Jacobian
-of a calibration step 1.8× faster), with no host callback in the compiled program (so
-it is cached).
+to every parameter come from the implicit function theorem, with no host callback in
+the compiled program (so it is cached). Its linear system is solved one of two ways,
+by the robot's number of springs (`DENSE_SPRINGS`):
+
+- many springs (Agile Justin's 60): by the same contraction (`_linalg/iterative.py`),
+  a few Hessian-vector products per derivative direction instead of one per spring to
+  form the matrix (Justin's 300-pose calibration Jacobian 0.19 s against 0.70 s);
+- few springs (a six-joint arm with joint springs only): the matrix on the robot's
+  springs, formed and factored once per pose, then one LU solve per direction (the
+  FANUC's 48-row Jacobian in its ten spring parameters 0.06 s against 0.25 s).
 
 All functions handle one configuration; batch with `jax.vmap`.
 """
@@ -25,10 +30,13 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._linalg.iterative import implicit_solve
+from .._linalg.solvers import lu_solver
 from .kinematics import Rx, Ry, Rz
 from .spring_laws import SpringLaw
 from .tree import TreeRobot
@@ -151,9 +159,14 @@ def gravity_potential(
     robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"]
 ) -> Float[Array, ""]:
     """Potential energy of the point masses in gravity, J."""
+    return _gravity(robot, *element_poses(robot, q, phi), q.dtype)
+
+
+def _gravity(robot: TreeRobot, R: Array, t: Array, dtype) -> Array:
     if not robot.mass_element:
-        return jnp.zeros((), q.dtype)
-    x = _points(robot, q, phi, robot.mass_element, robot.mass_at)
+        return jnp.zeros((), dtype)
+    el = jnp.asarray(robot.mass_element, int)
+    x = _mv(R[el], robot.mass_at) + t[el]
     return -jnp.sum(robot.mass_kg * _mv(x, robot.gravity))
 
 
@@ -217,7 +230,10 @@ def potential(
     """The potential (J) whose gradient the springs balance: gravity of the masses,
     the spring laws, and the work of a `force` (N, base frame) applied at marker `at`.
     (The springs' own energy is carried by the equilibrium condition.)"""
-    u = gravity_potential(robot, q, phi)
+    # One pass through the tree serves the masses and the loaded marker (the gradient
+    # of the potential is the residual of every equilibrium step).
+    R, t = element_poses(robot, q, phi)
+    u = _gravity(robot, R, t, q.dtype)
     for law, joints, rows in law_batches(robot):
         if law.acts_on == "deflection":  # the joint's own spring deflection θ
             u = u + jnp.sum(law.potential(phi[rows, 0]))
@@ -226,7 +242,8 @@ def potential(
         elif law.acts_on != "torque":  # (those enter the balance: `_residual`)
             raise ValueError(f"spring law {law.law!r}: unknown acts_on {law.acts_on!r}")
     if force is not None:
-        u = u - jnp.dot(force, marker_pose(robot, q, phi, at)[1])
+        el = robot.marker_element[at]
+        u = u - jnp.dot(force, _mv(R[el], robot.marker_at[at]) + t[el])
     return u
 
 
@@ -246,6 +263,11 @@ class TreeEquilibrium(eqx.Module):
 #: a derivative's cost. `derivative_rtol` sets it per call: a fit's Jacobian needs less
 #: (see `_identification/elastogeometric.py`).
 DERIVATIVE_RTOL = 1e-6
+
+#: Robots with at most this many springs take the implicit derivative from the matrix
+#: `I − ∂g/∂φ` itself (one Hessian-vector product per spring, then LU), exact and
+#: independent of `derivative_rtol`; larger ones iterate (above).
+DENSE_SPRINGS = 12
 
 
 # Traced once per robot structure and argument shapes, then reused: the residual (the
@@ -354,14 +376,30 @@ def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int, derivative_r
     t_in = jax.tree_util.tree_map(zero, tangents, primals, is_leaf=lambda x: x is None)
     _, b = eqx.filter_jvp(lambda *a: _step(phi, (*a, at)), primals, t_in)
     g = lambda p: _step(p, args)
+    jvp_g = lambda v: jax.jvp(g, (phi,), (v,))[1]
+    active = np.flatnonzero(robot.spring_mask())
+    if active.size <= DENSE_SPRINGS:
+        return phi, _dense_solve(jvp_g, b, active)
     _, vjp = jax.vjp(g, phi)
-    t_phi = implicit_solve(
-        lambda v: jax.jvp(g, (phi,), (v,))[1],
-        lambda v: vjp(v)[0],
-        b,
-        rtol=derivative_rtol,
-    )
-    return phi, t_phi
+    return phi, implicit_solve(jvp_g, lambda v: vjp(v)[0], b, rtol=derivative_rtol)
+
+
+def _dense_solve(jvp_g, b: Array, active: np.ndarray) -> Array:
+    # `(I − ∂g/∂φ)` on the springs the robot has, formed by one product per spring and
+    # solved by LU (transposable, so reverse mode works as for the iteration). A spring
+    # the robot lacks has zero compliance, so its row of g is zero and its derivative
+    # is zero too.
+    rows = jnp.asarray(active)
+
+    def reduced(v: Array) -> Array:
+        full = jnp.zeros(b.size, b.dtype).at[rows].set(v, unique_indices=True)
+        return v - jvp_g(full.reshape(b.shape)).reshape(-1)[rows]
+
+    A = jax.jacfwd(reduced)(jnp.zeros(active.size, b.dtype))
+    x = lx.linear_solve(
+        lx.MatrixLinearOperator(A), b.reshape(-1)[rows], lu_solver(), throw=False
+    ).value
+    return jnp.zeros(b.size, b.dtype).at[rows].set(x, unique_indices=True).reshape(b.shape)
 
 
 @eqx.filter_jit
