@@ -120,15 +120,19 @@ def element_poses(
     R0 = jnp.broadcast_to(jnp.eye(3, dtype=dtype), (e + 1, 3, 3))
     t0 = jnp.zeros((e + 1, 3), dtype)
 
+    # Each element's own transform, all at once; the scan only composes them.
+    slides = jnp.asarray(robot.sliding, dtype)
+    local = jax.vmap(_element_transform, in_axes=(0, 0, 0, 0, 0, None))(
+        robot.origin, robot.dh, angles, springs, slides, robot.lateral_before_joint
+    )
+
     def body(carry, x):
         Rs, ts = carry
-        i, parent, origin, dh, angle, spring, slides = x
-        R, t = _element_transform(origin, dh, angle, spring, slides, robot.lateral_before_joint)
+        i, parent, R, t = x
         R, t = _mm(Rs[parent], R), ts[parent] + _mv(Rs[parent], t)
         return (Rs.at[i].set(R), ts.at[i].set(t)), None
 
-    slides = jnp.asarray(robot.sliding, dtype)
-    xs = (jnp.arange(e), parents, robot.origin, robot.dh, angles, springs, slides)
+    xs = (jnp.arange(e), parents, *local)
     (Rs, ts), _ = jax.lax.scan(body, (R0, t0), xs)
     return Rs[:e], ts[:e]
 
