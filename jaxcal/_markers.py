@@ -5,7 +5,10 @@ Columns (units in the names): `q1_deg … qN_deg`, the robot file's N active joi
 order (`qI_mm` for a prismatic joint); for each marker `M` named in the robot file,
 `M_x_mm, M_y_mm, M_z_mm`; optional `sigma_mm` (each coordinate's standard deviation,
 default the robot file's `noise_std_mm`) and `id`. An empty marker (all three cells
-empty) was not seen in that row. There are no load columns: the robot carries its own weight only.
+empty) was not seen in that row. Optional load columns `fx_N, fy_N, fz_N` and
+`mx_Nm, my_Nm, mz_Nm` (each triple complete or absent): a wrench in the robot's base
+frame applied at the robot file's first marker (its tool), beside the robot's own
+weight; without them the robot carries its own weight only (Agile Justin's data).
 
 Inside, `MarkerData` is SI (rad, m); unseen markers are NaN with `seen` false.
 """
@@ -21,7 +24,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._io import DataError, atomic_file, finite_number, read_rows
+from ._io import F_COLS, M_COLS, DataError, atomic_file, finite_number, read_rows
 from ._model.tree import TreeRobot
 
 __all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns", "random_plan"]
@@ -40,6 +43,8 @@ class MarkerData(eqx.Module):
       not seen; `None` for a plan (poses only).
     - `seen`: `(n, k)` which markers were measured.
     - `sigma`: `(n,)` standard deviation of each coordinate, m.
+    - `force`, `moment`: `(n, 3)` wrench applied at the robot's first marker, N and
+      N·m, base frame; `None`: none (the robot's own weight only).
     - `ids`: row labels.
     """
 
@@ -47,6 +52,8 @@ class MarkerData(eqx.Module):
     markers: Float[Array | np.ndarray, "n k 3"] | None
     seen: Bool[Array | np.ndarray, "n k"]
     sigma: Float[Array | np.ndarray, " n"]
+    force: Float[Array | np.ndarray, "n 3"] | None = None
+    moment: Float[Array | np.ndarray, "n 3"] | None = None
     ids: tuple[str, ...] = eqx.field(static=True, default=())
     source: str = eqx.field(static=True, default="")
 
@@ -57,11 +64,14 @@ class MarkerData(eqx.Module):
         """The rows `rows` (indices or a boolean mask)."""
         rows = np.arange(len(self))[np.asarray(rows)]
         ids = tuple(self.ids[i] for i in rows) if self.ids else ()
+        pick = lambda x: None if x is None else np.asarray(x)[rows]  # noqa: E731
         return MarkerData(
             q=np.asarray(self.q)[rows],
-            markers=None if self.markers is None else np.asarray(self.markers)[rows],
+            markers=pick(self.markers),
             seen=np.asarray(self.seen)[rows],
             sigma=np.asarray(self.sigma)[rows],
+            force=pick(self.force),
+            moment=pick(self.moment),
             ids=ids,
             source=self.source,
         )
@@ -104,14 +114,18 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     dupes = sorted({h for h in header if header.count(h) > 1})
     if dupes:
         raise DataError(f"{path}: duplicate column(s) {', '.join(dupes)}")
-    unknown = [h for h in header if h not in (*qcols, *mcols, "sigma_mm", "id")]
+    unknown = [h for h in header if h not in (*qcols, *mcols, *F_COLS, *M_COLS, "sigma_mm", "id")]
     if unknown:
         raise DataError(
             f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; robot "
             f"{robot.name!r} has joints {', '.join(qcols)} and markers "
-            f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm)"
+            f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm); "
+            f"optional: {', '.join(F_COLS + M_COLS)}, sigma_mm, id"
         )
     missing = [c for c in qcols if c not in header]
+    loads = [cols for cols in (F_COLS, M_COLS) if any(c in header for c in cols)]
+    for cols in loads:
+        missing += [c for c in cols if c not in header]
     for m in robot.marker_names:
         cols = [f"{m}_{a}_mm" for a in "xyz"]
         have = [c in header for c in cols]
@@ -132,6 +146,7 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     q = np.zeros((n, robot.n_joints))
     y = np.full((n, k, 3), np.nan)
     sigma = np.full(n, robot.noise_std)
+    wrench = {cols: np.zeros((n, 3)) for cols in loads}
     ids: list[str] = []
     unit = joint_units(robot)
     limits = np.asarray(robot.joint_limits) * unit[:, None]
@@ -173,6 +188,13 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
                     )
                 else:
                     y[r, j, "xyz".index(a)] = v * 1e-3
+        for cols in loads:
+            for a, c in enumerate(cols):
+                v = finite_number(row[col[c]].strip())
+                if v is None:
+                    problems.append(f"{where}, column {c}: {row[col[c]]!r} is not a finite number")
+                else:
+                    wrench[cols][r, a] = v
         if "sigma_mm" in col:
             v = finite_number(row[col["sigma_mm"]].strip())
             if v is None or v <= 0 or v > FAR_MM:
@@ -195,6 +217,8 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
         markers=y if present else None,
         seen=seen,
         sigma=sigma,
+        force=wrench.get(F_COLS, np.zeros((n, 3)) if M_COLS in wrench else None),
+        moment=wrench.get(M_COLS),
         ids=tuple(ids),
         source=str(path),
     )
@@ -209,10 +233,12 @@ def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot,
     unit = joint_units(robot)
     with contextlib.ExitStack() as stack:
         fh = stack.enter_context(atomic_file(path)) if isinstance(path, str | Path) else path
+        loads = [(c, x) for c, x in ((F_COLS, data.force), (M_COLS, data.moment)) if x is not None]
         w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["id", *qcols, *mcols, "sigma_mm"])
+        w.writerow(["id", *qcols, *(c for cols, _ in loads for c in cols), *mcols, "sigma_mm"])
         for r in range(len(data)):
             cells = [f"{v:.12g}" for v in np.asarray(data.q[r]) * unit]
+            cells += [f"{v:.12g}" for _, x in loads for v in np.asarray(x[r])]
             cells += ["" if not np.isfinite(v) else f"{v:.6f}" for v in y[r].ravel()]
             label = data.ids[r] if data.ids else str(r + 1)
             w.writerow([label, *cells, f"{float(data.sigma[r]) * 1e3:g}"])

@@ -210,6 +210,12 @@ def _header(extra=""):
             "column right_x_mm: 'nan' is not a finite",
         ),
         (",right_x_mm,right_y_mm,right_z_mm", ",,2,3", "column right_x_mm: empty"),
+        (",fx_N,fy_N,right_x_mm,right_y_mm,right_z_mm", ",1,2,1,2,3", "missing column(s) fz_N"),
+        (
+            ",mx_Nm,my_Nm,mz_Nm,right_x_mm,right_y_mm,right_z_mm",
+            ",1,2kN,3,1,2,3",
+            "column my_Nm: '2kN' is not a finite",
+        ),
     ],
 )
 def test_bad_marker_files_are_named(tmp_path, justin, capsys, header, row, needle):

@@ -33,12 +33,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
 from .._batching import split_map
 from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from .._model.tree_statics import predict_markers
+from .._model.tree_statics import DERIVATIVE_RTOL, predict_markers
 from .._precision import require_float64
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
@@ -58,6 +59,8 @@ __all__ = [
     "TreeCalibration",
     "calibrate_tree",
     "observations",
+    "poses",
+    "pose_markers",
     "scaled_jacobian",
 ]
 
@@ -91,9 +94,23 @@ def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
     return rows, markers
 
 
-def _predict(robot: TreeRobot, table, p, q, rows, markers):
+def poses(data: MarkerData) -> tuple[Array, Array | None, Array | None]:
+    """Each row's commanded angles and its wrench at the first marker (`None` where the
+    data have none), as arrays with a leading row axis: what `pose_markers` maps over."""
+    force = None if data.force is None else jnp.asarray(data.force)
+    moment = None if data.moment is None else jnp.asarray(data.moment)
+    return jnp.asarray(data.q), force, moment
+
+
+def pose_markers(robot: TreeRobot, pose, *, derivative_rtol: float = DERIVATIVE_RTOL):
+    """`predict_markers` at one row of `poses(data)`."""
+    q, force, moment = pose
+    return predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
+
+
+def _predict(robot: TreeRobot, table, p, x, rows, markers):
     r = set_vector(robot, table, p)
-    y, ok = split_map(predict_markers, r, q)
+    y, ok = split_map(pose_markers, r, x)
     return y[rows, markers], ok
 
 
@@ -102,8 +119,8 @@ def _predict(robot: TreeRobot, table, p, q, rows, markers):
 # wait besides the fit itself.
 @exported
 @eqx.filter_jit
-def _weighted_jacobian(robot, table, q, rows, markers, sigma, scale):
-    _, _, J = _jacobian(robot, table, get_vector(robot, table), q, rows, markers)
+def _weighted_jacobian(robot, table, x, rows, markers, sigma, scale):
+    _, _, J = _jacobian(robot, table, get_vector(robot, table), x, rows, markers)
     return (J * scale / sigma[:, None, None]).reshape(-1, scale.shape[0])
 
 
@@ -116,7 +133,7 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
     J = _weighted_jacobian(
         robot,
         table,
-        jnp.asarray(data.q),
+        poses(data),
         rows,
         markers,
         jnp.asarray(np.asarray(data.sigma)[rows]),
@@ -191,31 +208,32 @@ def _undetermined(table, fitted, est, std, threshold) -> list[int]:
     ]
 
 
-def _jacobian(robot: TreeRobot, table, p, q, rows, markers):
+def _jacobian(robot: TreeRobot, table, p, x, rows, markers):
     """Predictions, ok flags and their Jacobian in `p`, by reverse mode pose by pose: a
     pose has 3k outputs against P ~ 100 parameters, and the equilibrium's adjoint is one
     solve per output."""
 
-    def pose(p, q):
-        y, ok = predict_markers(set_vector(robot, table, p), q, derivative_rtol=JACOBIAN_RTOL)
+    def pose(p, x):
+        r = set_vector(robot, table, p)
+        y, ok = pose_markers(r, x, derivative_rtol=JACOBIAN_RTOL)
         return y, (y, ok)
 
-    J, (y, ok) = split_map(jax.jacrev(pose, has_aux=True), p, q)
+    J, (y, ok) = split_map(jax.jacrev(pose, has_aux=True), p, x)
     return y[rows, markers], ok, J[rows, markers]
 
 
 @exported
 @eqx.filter_jit
-def _fit(robot, table, mask, q, rows, markers, target, sigma, scale, prior_weight, max_steps):
+def _fit(robot, table, mask, x, rows, markers, target, sigma, scale, prior_weight, max_steps):
     p0 = get_vector(robot, table)
     return nonlinear_fit(
-        lambda p: _predict(robot, table, p, q, rows, markers),
+        lambda p: _predict(robot, table, p, x, rows, markers),
         p0,
         target,
         sigma,
         scale=scale,
         mask=mask,
-        jacobian=lambda p: _jacobian(robot, table, p, q, rows, markers),
+        jacobian=lambda p: _jacobian(robot, table, p, x, rows, markers),
         prior_weight=prior_weight,
         max_steps=max_steps,
         rtol=LM_TOL,
@@ -285,20 +303,21 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
     if unknown:
         raise ValueError(f"hold: unknown parameter(s) {unknown}")
     rows, markers = observations(data)
-    q = jnp.asarray(data.q)
+    x = poses(data)
+    q = x[0]
     sigma = jnp.asarray(np.asarray(data.sigma)[rows])
     target = jnp.asarray(np.asarray(data.markers)[rows, markers])
     scale = jnp.asarray([p.scale for p in table])
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
-    J = np.asarray(_weighted_jacobian(robot, table, q, rows, markers, sigma, scale))
+    J = np.asarray(_weighted_jacobian(robot, table, x, rows, markers, sigma, scale))
     fitted = fitted_parameters(J, want, has_prior, rcond)
     fit = _fit(
         robot,
         table,
         jnp.asarray(fitted, q.dtype),
-        q,
+        x,
         rows,
         markers,
         target,

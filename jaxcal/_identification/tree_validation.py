@@ -7,29 +7,26 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from .._batching import split_map
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from .._model.tree_statics import predict_markers
-from .elastogeometric import TreeCalibration, calibrate_tree, observations
+from .elastogeometric import TreeCalibration, calibrate_tree, observations, pose_markers, poses
 from .parameter_groups import PriorSpec, default_groups
 
 __all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_markers"]
 
 
 @eqx.filter_jit
-def _markers_of(robot: TreeRobot, q: Float[Array, "n N"]):
-    return split_map(predict_markers, robot, q)
+def _markers_of(robot: TreeRobot, x):
+    return split_map(pose_markers, robot, x)
 
 
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
-    """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, and
-    `(n,)` whether each equilibrium converged."""
-    y, ok = _markers_of(robot, jnp.asarray(data.q))
+    """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, under
+    their loads if they have any, and `(n,)` whether each equilibrium converged."""
+    y, ok = _markers_of(robot, poses(data))
     return np.asarray(y), np.asarray(ok)
 
 

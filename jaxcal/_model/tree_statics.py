@@ -428,10 +428,19 @@ def tree_deflection(
 
 @eqx.filter_jit
 def predict_markers(
-    robot: TreeRobot, q: Float[Array, " n"], *, derivative_rtol: float = DERIVATIVE_RTOL
+    robot: TreeRobot,
+    q: Float[Array, " n"],
+    force: Float[Array, 3] | None = None,
+    moment: Float[Array, 3] | None = None,
+    *,
+    at: int | str = 0,
+    derivative_rtol: float = DERIVATIVE_RTOL,
 ) -> tuple[Float[Array, "k 3"], Bool[Array, ""]]:
-    """Marker positions (m, measurement frame) of the loaded-by-gravity robot at commanded
-    angles `q`, and whether the equilibrium converged; differentiable as
+    """Marker positions (m, measurement frame) of the robot loaded by gravity and an
+    optional wrench (`force` N, `moment` N·m, base frame, applied at marker `at`) at
+    commanded angles `q`, and whether the equilibrium converged; differentiable as
     `tree_equilibrium`."""
-    eq = tree_equilibrium(robot, q, derivative_rtol=derivative_rtol)
+    eq = tree_equilibrium(
+        robot, q, force=force, moment=moment, at=at, derivative_rtol=derivative_rtol
+    )
     return marker_positions(robot, q, eq.phi), eq.converged

@@ -84,7 +84,14 @@ def select_tree_rows(
     W = None
     if criterion == "task":
         assert task is not None
-        unit = MarkerData(q=task.q, markers=None, seen=task.seen, sigma=np.ones(len(task.q)))
+        unit = MarkerData(
+            q=task.q,
+            markers=None,
+            seen=task.seen,
+            sigma=np.ones(len(task.q)),
+            force=task.force,
+            moment=task.moment,
+        )
         Jt = scaled_jacobian(robot, table, unit)[:, :, cols]  # m per typical size
         W = np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
     ones = np.ones(len(pool.q))  # obs is already σ-weighted
