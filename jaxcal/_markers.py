@@ -1,5 +1,6 @@
-"""Absolute measurements as instruments give them: marker positions in the measurement
-system's frame (a laser tracker's, a camera system's), one robot pose a row.
+"""Measurements as instruments give them: marker positions in the measurement system's
+frame (a laser tracker's, a camera system's), one robot pose a row; or, the deflection
+data format, the tool's displacement under a load.
 
 Columns (units in the names): `q1_deg … qN_deg`, the robot file's N active joints in its
 order (`qI_mm` for a prismatic joint); for each marker `M` named in the robot file,
@@ -9,6 +10,9 @@ empty) was not seen in that row. Optional load columns `fx_N, fy_N, fz_N` and
 `mx_Nm, my_Nm, mz_Nm` (each triple complete or absent): a wrench in the robot's base
 frame applied at the robot file's first marker (its tool), beside the robot's own
 weight; without them the robot carries its own weight only (Agile Justin's data).
+Deflection data have `dx_mm, dy_mm, dz_mm` (the first marker's displacement when the
+load is applied, loaded minus unloaded at the same angles, base frame) in place of the
+marker columns, and need the load columns.
 
 Inside, `MarkerData` is SI (rad, m); unseen markers are NaN with `seen` false.
 """
@@ -24,7 +28,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._io import F_COLS, M_COLS, DataError, atomic_file, finite_number, read_rows
+from ._io import D_COLS, F_COLS, M_COLS, DataError, atomic_file, finite_number, read_rows
 from ._model.tree import TreeRobot
 
 __all__ = ["MarkerData", "read_markers", "write_markers", "marker_columns", "random_plan"]
@@ -45,6 +49,9 @@ class MarkerData(eqx.Module):
     - `sigma`: `(n,)` standard deviation of each coordinate, m.
     - `force`, `moment`: `(n, 3)` wrench applied at the robot's first marker, N and
       N·m, base frame; `None`: none (the robot's own weight only).
+    - `deflection`: the measured quantity is the first marker's displacement when the
+      wrench is applied, loaded minus unloaded at the same angles (m, base frame: the
+      deflection data format), not its position; only that marker is seen.
     - `ids`: row labels.
     """
 
@@ -54,6 +61,7 @@ class MarkerData(eqx.Module):
     sigma: Float[Array | np.ndarray, " n"]
     force: Float[Array | np.ndarray, "n 3"] | None = None
     moment: Float[Array | np.ndarray, "n 3"] | None = None
+    deflection: bool = eqx.field(static=True, default=False)
     ids: tuple[str, ...] = eqx.field(static=True, default=())
     source: str = eqx.field(static=True, default="")
 
@@ -72,6 +80,7 @@ class MarkerData(eqx.Module):
             sigma=np.asarray(self.sigma)[rows],
             force=pick(self.force),
             moment=pick(self.moment),
+            deflection=self.deflection,
             ids=ids,
             source=self.source,
         )
@@ -114,17 +123,20 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     dupes = sorted({h for h in header if header.count(h) > 1})
     if dupes:
         raise DataError(f"{path}: duplicate column(s) {', '.join(dupes)}")
-    unknown = [h for h in header if h not in (*qcols, *mcols, *F_COLS, *M_COLS, "sigma_mm", "id")]
+    known = (*qcols, *mcols, *F_COLS, *M_COLS, *D_COLS, "sigma_mm", "id")
+    unknown = [h for h in header if h not in known]
     if unknown:
         raise DataError(
             f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; robot "
             f"{robot.name!r} has joints {', '.join(qcols)} and markers "
-            f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm); "
-            f"optional: {', '.join(F_COLS + M_COLS)}, sigma_mm, id"
+            f"{', '.join(robot.marker_names)} (columns M_x_mm, M_y_mm, M_z_mm, or the "
+            f"deflection {', '.join(D_COLS)}); optional: {', '.join(F_COLS + M_COLS)}, "
+            "sigma_mm, id"
         )
     missing = [c for c in qcols if c not in header]
     loads = [cols for cols in (F_COLS, M_COLS) if any(c in header for c in cols)]
-    for cols in loads:
+    deflection = any(c in header for c in D_COLS)
+    for cols in [*loads, *([D_COLS] if deflection else [])]:
         missing += [c for c in cols if c not in header]
     for m in robot.marker_names:
         cols = [f"{m}_{a}_mm" for a in "xyz"]
@@ -133,7 +145,20 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
             missing += [c for c, h in zip(cols, have, strict=True) if not h]
     if missing:
         raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
-    present = [m for m in robot.marker_names if f"{m}_x_mm" in header]
+    present = {m: [f"{m}_{a}_mm" for a in "xyz"] for m in robot.marker_names}
+    present = {m: cols for m, cols in present.items() if cols[0] in header}
+    if deflection:
+        if present:
+            raise DataError(
+                f"{path}: marker columns ({', '.join(present)}) beside the deflection "
+                f"columns {', '.join(D_COLS)}: a file holds one kind of measurement"
+            )
+        if not loads:
+            raise DataError(
+                f"{path}: deflection columns without load columns ({', '.join(F_COLS + M_COLS)}):"
+                " a deflection is the response to a load"
+            )
+        present = {robot.marker_names[0]: list(D_COLS)}
     if require_markers and not present:
         raise DataError(
             f"{path}: no marker columns; expected {', '.join(mcols)} (some or all markers)"
@@ -167,12 +192,12 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
                 )
             else:
                 q[r, i] = v / unit[i]
-        for m in present:
+        for m, names in present.items():
             j = robot.marker_names.index(m)
-            cells = [row[col[f"{m}_{a}_mm"]].strip() for a in "xyz"]
+            cells = [row[col[c]].strip() for c in names]
             if not any(cells):
                 continue  # not seen in this row
-            for a, cell in zip("xyz", cells, strict=True):
+            for a, c, cell in zip("xyz", names, cells, strict=True):
                 v = finite_number(cell)
                 if v is None:
                     what = (
@@ -180,10 +205,10 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
                         if not (cell)
                         else f"{cell!r} is not a finite number"
                     )
-                    problems.append(f"{where}, column {m}_{a}_mm: {what}")
+                    problems.append(f"{where}, column {c}: {what}")
                 elif abs(v) > FAR_MM:
                     problems.append(
-                        f"{where}, column {m}_{a}_mm: {v:g} mm is not a plausible marker "
+                        f"{where}, column {c}: {v:g} mm is not a plausible marker "
                         f"position (farther than any tracker measures, {FAR_MM:g} mm)"
                     )
                 else:
@@ -219,6 +244,7 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
         sigma=sigma,
         force=wrench.get(F_COLS, np.zeros((n, 3)) if M_COLS in wrench else None),
         moment=wrench.get(M_COLS),
+        deflection=deflection,
         ids=tuple(ids),
         source=str(path),
     )
@@ -226,10 +252,13 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
 
 def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot, markers) -> None:
     """Write `data`'s poses with `markers` `(n, k, 3)` (m; NaN: not written) as an
-    absolute-measurement CSV, to a path (atomically: a failure leaves any old file as it
-    was) or an open text stream."""
+    absolute-measurement CSV (a deflection file, `dx_mm ..` of the first marker, for
+    deflection data), to a path (atomically: a failure leaves any old file as it was) or
+    an open text stream."""
     qcols, mcols = marker_columns(robot)
     y = np.asarray(markers) * 1e3
+    if data.deflection:
+        mcols, y = D_COLS, y[:, :1]
     unit = joint_units(robot)
     with contextlib.ExitStack() as stack:
         fh = stack.enter_context(atomic_file(path)) if isinstance(path, str | Path) else path

@@ -17,6 +17,7 @@ from __future__ import annotations
 import copy
 import csv
 import json
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -256,6 +257,47 @@ def test_absolute_measurements_under_loads(fanuc, tmp_path, capsys):
         p = fitted[t.name]
         assert p["std"] <= 0.1 * p["value"] and not p["not_determined"], p
         assert abs(p["value"] - k * t.factor) <= 4 * p["std"], (p, k * t.factor)
+
+
+def test_deflection_data_calibrate_the_tree_as_the_template_model(fanuc, tmp_path, capsys):
+    """The FANUC's deflection data (the example plan: loaded minus unloaded tool
+    positions) read for the robot as a tree and calibrated through the tree's equilibrium
+    (`jaxcal identify --robot TREE.json`) give the template model's nonlinear fit, the
+    compensator held in both: the six compliances to 0.03 std (where either fit may stop:
+    `LM_CHI2_TOL`) and their stds to 1e-4 relative (the accuracy of the tree's Jacobian,
+    `JACOBIAN_RTOL`)."""
+    robot, tree = fanuc
+    path = tmp_path / "fanuc_tree.json"
+    path.write_text(json.dumps(jaxcal.tree_to_dict(tree)))
+    data = jaxcal.read_dataset(DATA / "example_calibration.csv", robot)
+    with warnings.catch_warnings():  # what it says of the example data is not tested here
+        warnings.simplefilter("ignore")
+        ref = jaxcal.identify(robot, data, fix=("Kc", "s0"))
+    args = ["identify", str(DATA / "example_calibration.csv"), "--robot", str(path), "--json"]
+    assert main([*args, "--params", "joint-compliance"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["converged"] and out["held"] == [] and out["not_determined"] == {}
+    fitted = {p["name"]: p for p in out["parameters"]}
+    for i in range(6):
+        k, s = float(ref.estimate[i]), float(ref.std[i])
+        p = fitted[f"J{i + 1}.k_theta"]
+        assert abs(p["value"] - k) <= 0.03 * s, (p, k, s)
+        assert abs(p["std"] - s) <= 1e-4 * s, (p, s)
+    # The tree's deflections written as the data format (`jaxcal simulate`, noise-free):
+    # the template's to the file's 1e-6 mm, beyond the models' 2 nm agreement.
+    sims = {}
+    for name, extra in (("tree", ["--robot", str(path)]), ("template", [])):
+        sims[name] = tmp_path / f"{name}.csv"
+        cmd = ["simulate", str(DATA / "example_calibration.csv"), "-o", str(sims[name])]
+        assert main([*cmd, *extra]) == 0
+    cols = ["dx_mm", "dy_mm", "dz_mm"]
+    tree_d, ref_d = (np.asarray(jaxcal.read_dataset(sims[n], robot).deflection) for n in sims)
+    np.testing.assert_allclose(tree_d, ref_d, rtol=0, atol=1e-8)  # m
+    assert all(c in sims["tree"].read_text().splitlines()[0] for c in cols)
+    # The same residuals against the same noise (0.02 mm, from the file): χ² equal but for
+    # where each fit stopped, ≤ 6 × 0.03² above the minimum.
+    assert out["dof"] == ref.dof, (out["dof"], ref.dof)
+    assert abs(out["chi2"] - float(ref.chi2_red) * ref.dof) <= 6 * 0.03**2
 
 
 def test_lateral_springs_before_or_after_the_joint():

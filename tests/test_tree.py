@@ -216,6 +216,12 @@ def _header(extra=""):
             ",1,2kN,3,1,2,3",
             "column my_Nm: '2kN' is not a finite",
         ),
+        (",dx_mm,dy_mm,dz_mm", ",1,2,3", "deflection columns without load columns"),
+        (
+            ",fx_N,fy_N,fz_N,dx_mm,dy_mm,dz_mm,left_x_mm,left_y_mm,left_z_mm",
+            ",0,0,-100,1,2,3,1,2,3",
+            "marker columns (left) beside the deflection columns",
+        ),
     ],
 )
 def test_bad_marker_files_are_named(tmp_path, justin, capsys, header, row, needle):

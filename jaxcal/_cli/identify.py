@@ -105,7 +105,7 @@ def register(sub) -> None:
         "--params",
         default=None,
         metavar="GROUPS",
-        help="robots given as a kinematic tree (absolute marker data): comma-separated "
+        help="robots given as a kinematic tree (marker positions or deflections): comma-separated "
         "parameter groups to fit, of frames,joint-offsets,dh,joint-compliance,"
         "lateral-compliance (default: every group the data determine)",
     )
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         return identify_tree(args)
     if args.prior:
         raise ValueError(
-            "--prior: priors are for robots given as a kinematic tree (absolute marker data); "
+            "--prior: priors are for robots given as a kinematic tree; "
             "for this robot hold a parameter at its value with --fix"
         )
     if args.save_robot and args.save_robot.lower().endswith(".urdf"):

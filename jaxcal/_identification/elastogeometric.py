@@ -102,15 +102,23 @@ def poses(data: MarkerData) -> tuple[Array, Array | None, Array | None]:
     return jnp.asarray(data.q), force, moment
 
 
-def pose_markers(robot: TreeRobot, pose, *, derivative_rtol: float = DERIVATIVE_RTOL):
-    """`predict_markers` at one row of `poses(data)`."""
+def pose_markers(
+    robot: TreeRobot, pose, deflection: bool = False, *, derivative_rtol: float = DERIVATIVE_RTOL
+):
+    """What a row of `poses(data)` measures: `predict_markers` under the row's load, or
+    with `deflection` every marker's displacement when the load is applied (loaded minus
+    unloaded at the same angles; the deflection data format)."""
     q, force, moment = pose
-    return predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
+    y, ok = predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
+    if not deflection:
+        return y, ok
+    y0, ok0 = predict_markers(robot, q, derivative_rtol=derivative_rtol)
+    return y - y0, ok & ok0
 
 
-def _predict(robot: TreeRobot, table, p, x, rows, markers):
+def _predict(robot: TreeRobot, table, p, x, deflection, rows, markers):
     r = set_vector(robot, table, p)
-    y, ok = split_map(pose_markers, r, x)
+    y, ok = split_map(lambda r, x: pose_markers(r, x, deflection), r, x)
     return y[rows, markers], ok
 
 
@@ -119,8 +127,8 @@ def _predict(robot: TreeRobot, table, p, x, rows, markers):
 # wait besides the fit itself.
 @exported
 @eqx.filter_jit
-def _weighted_jacobian(robot, table, x, rows, markers, sigma, scale):
-    _, _, J = _jacobian(robot, table, get_vector(robot, table), x, rows, markers)
+def _weighted_jacobian(robot, table, x, deflection, rows, markers, sigma, scale):
+    _, _, J = _jacobian(robot, table, get_vector(robot, table), x, deflection, rows, markers)
     return (J * scale / sigma[:, None, None]).reshape(-1, scale.shape[0])
 
 
@@ -134,6 +142,7 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
         robot,
         table,
         poses(data),
+        data.deflection,
         rows,
         markers,
         jnp.asarray(np.asarray(data.sigma)[rows]),
@@ -208,14 +217,14 @@ def _undetermined(table, fitted, est, std, threshold) -> list[int]:
     ]
 
 
-def _jacobian(robot: TreeRobot, table, p, x, rows, markers):
+def _jacobian(robot: TreeRobot, table, p, x, deflection, rows, markers):
     """Predictions, ok flags and their Jacobian in `p`, by reverse mode pose by pose: a
     pose has 3k outputs against P ~ 100 parameters, and the equilibrium's adjoint is one
     solve per output."""
 
     def pose(p, x):
         r = set_vector(robot, table, p)
-        y, ok = pose_markers(r, x, derivative_rtol=JACOBIAN_RTOL)
+        y, ok = pose_markers(r, x, deflection, derivative_rtol=JACOBIAN_RTOL)
         return y, (y, ok)
 
     J, (y, ok) = split_map(jax.jacrev(pose, has_aux=True), p, x)
@@ -224,16 +233,18 @@ def _jacobian(robot: TreeRobot, table, p, x, rows, markers):
 
 @exported
 @eqx.filter_jit
-def _fit(robot, table, mask, x, rows, markers, target, sigma, scale, prior_weight, max_steps):
+def _fit(
+    robot, table, mask, x, deflection, rows, markers, target, sigma, scale, prior_weight, max_steps
+):
     p0 = get_vector(robot, table)
     return nonlinear_fit(
-        lambda p: _predict(robot, table, p, x, rows, markers),
+        lambda p: _predict(robot, table, p, x, deflection, rows, markers),
         p0,
         target,
         sigma,
         scale=scale,
         mask=mask,
-        jacobian=lambda p: _jacobian(robot, table, p, x, rows, markers),
+        jacobian=lambda p: _jacobian(robot, table, p, x, deflection, rows, markers),
         prior_weight=prior_weight,
         max_steps=max_steps,
         rtol=LM_TOL,
@@ -311,13 +322,16 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
-    J = np.asarray(_weighted_jacobian(robot, table, x, rows, markers, sigma, scale))
+    J = np.asarray(
+        _weighted_jacobian(robot, table, x, data.deflection, rows, markers, sigma, scale)
+    )
     fitted = fitted_parameters(J, want, has_prior, rcond)
     fit = _fit(
         robot,
         table,
         jnp.asarray(fitted, q.dtype),
         x,
+        data.deflection,
         rows,
         markers,
         target,

@@ -19,14 +19,15 @@ __all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_m
 
 
 @eqx.filter_jit
-def _markers_of(robot: TreeRobot, x):
-    return split_map(pose_markers, robot, x)
+def _markers_of(robot: TreeRobot, x, deflection: bool):
+    return split_map(lambda r, x: pose_markers(r, x, deflection), robot, x)
 
 
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
     """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, under
-    their loads if they have any, and `(n,)` whether each equilibrium converged."""
-    y, ok = _markers_of(robot, poses(data))
+    their loads if they have any (for deflection data, the markers' displacements under
+    the loads), and `(n,)` whether each equilibrium converged."""
+    y, ok = _markers_of(robot, poses(data), data.deflection)
     return np.asarray(y), np.asarray(ok)
 
 

@@ -19,6 +19,13 @@ compilation cache.
 A run that does not converge within `max_steps` (a map that does not contract: a
 spring so soft that the robot buckles under its own weight) returns its last iterate.
 The forward iteration has failed first in that case, and its flag marks the point.
+
+Where `M` has few columns that matter (a robot with few springs), forming `I − M` on
+them, one product per column, and factoring it costs less than iterating for every
+derivative direction: `formed_solve`. Its LU is the package's own (`dense.py`) inside
+`jax.lax.custom_linear_solve`, not lineax's `linear_solve`: under `shard_map` (poses
+divided among devices) lineax compares the right-hand side's structure, which carries
+the device mesh, with the matrix's, which does not, and refuses the solve.
 """
 
 from __future__ import annotations
@@ -27,9 +34,12 @@ from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
-__all__ = ["richardson", "implicit_solve"]
+from .dense import lu_factor, lu_solve
+
+__all__ = ["richardson", "implicit_solve", "formed_solve"]
 
 
 def richardson(
@@ -68,3 +78,27 @@ def implicit_solve(
         solve=lambda _, rhs: richardson(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
         transpose_solve=lambda _, rhs: richardson(vjp_m, rhs, rtol=rtol, max_steps=max_steps),
     )
+
+
+def formed_solve(jvp_m: Callable[[Array], Array], b: Array, active: np.ndarray) -> Array:
+    """`(I − M)⁻¹ b` where only the entries `active` (indices into `b` flattened) of `x`
+    and `b` can be nonzero (`M`'s other rows are zero, its other columns are never
+    used): `I − M` formed on them, one product `jvp_m(v) = M v` per active entry, and
+    solved by LU; transposable, so reverse mode works as for `implicit_solve`."""
+    rows = jnp.asarray(active)
+
+    def scatter(v: Array) -> Array:
+        full = jnp.zeros(b.size, b.dtype).at[rows].set(v, unique_indices=True)
+        return full.reshape(b.shape)
+
+    def reduced(v: Array) -> Array:
+        return v - jvp_m(scatter(v)).reshape(-1)[rows]
+
+    lu, perm = lu_factor(jax.jacfwd(reduced)(jnp.zeros(rows.size, b.dtype)))
+    x = jax.lax.custom_linear_solve(
+        reduced,
+        b.reshape(-1)[rows],
+        solve=lambda _, r: lu_solve(lu, perm, r),
+        transpose_solve=lambda _, r: lu_solve(lu, perm, r, trans=True),
+    )
+    return scatter(x)

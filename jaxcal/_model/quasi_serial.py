@@ -154,4 +154,6 @@ def tree_dict_from_quasi_serial(d: dict) -> dict:
     }
     if "experiment" in d:
         out["experiment"] = d["experiment"]
+        if "noise_std_mm" in d["experiment"]:  # the measurements' noise, as the file says
+            out["noise_std_mm"] = d["experiment"]["noise_std_mm"]
     return out

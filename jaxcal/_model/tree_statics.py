@@ -30,13 +30,11 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from .._linalg.iterative import implicit_solve
-from .._linalg.solvers import lu_solver
+from .._linalg.iterative import formed_solve, implicit_solve
 from .kinematics import Rx, Ry, Rz
 from .spring_laws import SpringLaw
 from .tree import TreeRobot
@@ -383,27 +381,9 @@ def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int, derivative_r
     jvp_g = lambda v: jax.jvp(g, (phi,), (v,))[1]
     active = np.flatnonzero(robot.spring_mask())
     if active.size <= DENSE_SPRINGS:
-        return phi, _dense_solve(jvp_g, b, active)
+        return phi, formed_solve(jvp_g, b, active)
     _, vjp = jax.vjp(g, phi)
     return phi, implicit_solve(jvp_g, lambda v: vjp(v)[0], b, rtol=derivative_rtol)
-
-
-def _dense_solve(jvp_g, b: Array, active: np.ndarray) -> Array:
-    # `(I − ∂g/∂φ)` on the springs the robot has, formed by one product per spring and
-    # solved by LU (transposable, so reverse mode works as for the iteration). A spring
-    # the robot lacks has zero compliance, so its row of g is zero and its derivative
-    # is zero too.
-    rows = jnp.asarray(active)
-
-    def reduced(v: Array) -> Array:
-        full = jnp.zeros(b.size, b.dtype).at[rows].set(v, unique_indices=True)
-        return v - jvp_g(full.reshape(b.shape)).reshape(-1)[rows]
-
-    A = jax.jacfwd(reduced)(jnp.zeros(active.size, b.dtype))
-    x = lx.linear_solve(
-        lx.MatrixLinearOperator(A), b.reshape(-1)[rows], lu_solver(), throw=False
-    ).value
-    return jnp.zeros(b.size, b.dtype).at[rows].set(x, unique_indices=True).reshape(b.shape)
 
 
 @eqx.filter_jit
