@@ -42,6 +42,7 @@ from jaxcal.internal import (
 from jaxcal.internal.cli import main
 
 DATA = Path(__file__).parent / "data" / "dlr_agile_justin.csv"
+EXAMPLE = DATA.parent / "example_calibration.csv"
 
 
 @pytest.fixture(scope="module")
@@ -614,7 +615,11 @@ data = jaxcal.read_markers(sys.argv[1], robot).subset(np.arange(7))
 table = jaxcal.parameter_table(robot, jaxcal.default_groups(robot))
 y, ok = jaxcal.predicted_markers(robot, data)
 J = scaled_jacobian(robot, table, data)
-np.savez(sys.argv[2], y=y, ok=ok, J=J, devices=jax.device_count())
+fanuc = jaxcal.load_tree("fanuc_m900ib700")  # few springs: the formed implicit solve
+deflections = jaxcal.read_markers(sys.argv[3], fanuc).subset(np.arange(7))
+ftable = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
+Jf = scaled_jacobian(fanuc, ftable, deflections)
+np.savez(sys.argv[2], y=y, ok=ok, J=J, Jf=Jf, devices=jax.device_count())
 """
 
 
@@ -632,7 +637,7 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     millimetres."""
     out = tmp_path / "two.npz"
     proc = subprocess.run(
-        [sys.executable, "-c", _TWO_DEVICES, str(DATA), str(out)],
+        [sys.executable, "-c", _TWO_DEVICES, str(DATA), str(out), str(EXAMPLE)],
         capture_output=True,
         text=True,
         env=dict(os.environ, JAX_PLATFORMS="cpu"),
@@ -648,3 +653,10 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     np.testing.assert_array_equal(two["ok"], ok)
     J = scaled_jacobian(justin, table, sub)
     np.testing.assert_allclose(two["J"], J, rtol=0, atol=JACOBIAN_RTOL * np.abs(J).max())
+    # The FANUC's deflections: its Jacobian's implicit solve is formed and factored, exact
+    # but for round-off and the fixed point's 1e-12.
+    fanuc = jaxcal.load_tree("fanuc_m900ib700")
+    sub = jaxcal.read_markers(EXAMPLE, fanuc).subset(np.arange(7))
+    table = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
+    J = scaled_jacobian(fanuc, table, sub)
+    np.testing.assert_allclose(two["Jf"], J, rtol=0, atol=1e-9 * np.abs(J).max())
