@@ -154,11 +154,13 @@ from ._model.tree_files import (
     tree_from_dict as tree_from_dict,
     tree_to_dict as tree_to_dict,
 )
-from ._model.tree_statics import (
-    TreeEquilibrium as TreeEquilibrium,
+from ._model.tree_kinematics import (
     element_frames as element_frames,
     link_angles as link_angles,
     marker_positions as marker_positions,
+)
+from ._model.tree_statics import (
+    TreeEquilibrium as TreeEquilibrium,
     predict_markers as predict_markers,
     tree_deflection as tree_deflection,
     tree_equilibrium as tree_equilibrium,

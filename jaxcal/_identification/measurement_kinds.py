@@ -28,12 +28,8 @@ from jaxtyping import Array, Float
 
 from .._linalg.covariance import covariance_from_jacobian
 from .._model.tree import TreeRobot
-from .._model.tree_statics import (
-    marker_index,
-    marker_pose,
-    marker_positions,
-    tree_equilibrium,
-)
+from .._model.tree_kinematics import marker_index, marker_pose, marker_positions
+from .._model.tree_statics import tree_equilibrium
 from .parameter_groups import Parameter, get_vector, parameter_table, set_vector
 from .pivoting import pivoted_subset
 

@@ -1,5 +1,6 @@
-"""Kinematics and elastostatics of a `TreeRobot`: element frames, marker positions in the
-measurement frame, the gravity potential and the static equilibrium of the springs.
+"""Elastostatics of a `TreeRobot`: the static equilibrium of its springs under gravity,
+the spring laws and an optional wrench, its implicit derivative, and what measurements
+see of it (deflections, marker positions); the kinematics are `tree_kinematics.py`'s.
 
 The equilibrium minimises the total potential `U(φ) = V(q, φ) + ½ Σ φ²/κ` over the
 spring deflections φ (three per moving element: about z, x, y), with `V` the gravity of
@@ -35,170 +36,26 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._linalg.iterative import formed_solve, implicit_solve
-from .kinematics import Rx, Ry, Rz
 from .spring_laws import SpringLaw
 from .tree import TreeRobot
+from .tree_kinematics import (
+    element_poses,
+    gravity_of_frames,
+    link_angles,
+    marker_index,
+    marker_of_frames,
+    marker_pose,
+    marker_positions,
+)
 
 __all__ = [
-    "rpy_matrix",
-    "pose_matrix",
-    "element_poses",
-    "element_frames",
-    "marker_positions",
-    "gravity_potential",
-    "link_angles",
     "law_batches",
-    "marker_index",
-    "marker_pose",
     "potential",
     "TreeEquilibrium",
     "tree_equilibrium",
     "tree_deflection",
     "predict_markers",
 ]
-
-
-def _mm(A: Array, B: Array) -> Array:
-    return A @ B
-
-
-def _mv(A: Array, v: Array) -> Array:
-    return (A @ v[..., None])[..., 0]
-
-
-def rpy_matrix(rpy: Float[Array, 3]) -> Float[Array, "3 3"]:
-    """`Rz(yaw) Ry(pitch) Rx(roll)` (URDF's convention)."""
-    return _mm(_mm(Rz(rpy[2]), Ry(rpy[1])), Rx(rpy[0]))
-
-
-def pose_matrix(R: Float[Array, "3 3"], t: Float[Array, 3]) -> Float[Array, "4 4"]:
-    top = jnp.concatenate([R, t[:, None]], axis=1)
-    return jnp.concatenate([top, jnp.array([[0.0, 0.0, 0.0, 1.0]], R.dtype)], axis=0)
-
-
-def _element_transform(origin, dh, angle, phi, slides, before: bool) -> tuple[Array, Array]:
-    # `angle` holds the joint springs' share already (`spring_matrix`); `phi` the
-    # element's lateral springs, turning with the link after the joint's motion or, with
-    # `before`, tilting the joint axis itself. A sliding element (`slides` 1) moves
-    # along z by `angle` instead: Rz and Trans_z commute, so only d and θ trade places.
-    turn, slide = angle * (1.0 - slides), angle * slides
-    d, theta, a, alpha, beta = dh[0] + slide, dh[1], dh[2], dh[3], dh[4]
-    Ro = rpy_matrix(origin[3:])
-    Rab = _mm(_mm(Ro, Rx(alpha)), Ry(beta))
-    lateral = _mm(Rx(phi[1]), Ry(phi[2]))
-    if before:
-        Rab = _mm(Rab, lateral)
-        R = _mm(Rab, Rz(theta + turn))
-    else:
-        R = _mm(_mm(Rab, Rz(theta + turn)), lateral)
-    # Translation: the origin, then a along the x after Rx(α) (which Rx(α) leaves), then
-    # d along the z of Rx(α)·Ry(β)·Rz(...) (which Rz leaves).
-    t = origin[:3] + Ro[:, 0] * a + Rab[:, 2] * d
-    return R, t
-
-
-def element_poses(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None = None
-) -> tuple[Float[Array, "e 3 3"], Float[Array, "e 3"]]:
-    """Rotation and position of every element's frame in the robot's base frame, for
-    commanded joint values `q` (rad; m for a prismatic joint) and spring deflections
-    `phi` (one row `(φz, φx, φy)` per moving element in `robot.revolute` order, rad; φz
-    in m for a prismatic element; default zero)."""
-    e = len(robot.names)
-    dtype = robot.dh.dtype
-    angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q
-    springs = jnp.zeros((e, 3), dtype)
-    if phi is not None:
-        angles = angles + jnp.asarray(robot.spring_matrix(), dtype) @ phi[:, 0]
-        springs = springs.at[jnp.asarray(robot.revolute, int)].set(phi)
-    # One scan over the elements in topological order (not a Python loop: the program,
-    # and so its trace and compile time, does not grow with the number of elements).
-    # Slot e of the carried buffers holds the base frame, the parent of root elements.
-    parents = jnp.asarray([p if p >= 0 else e for p in robot.parents], int)
-    R0 = jnp.broadcast_to(jnp.eye(3, dtype=dtype), (e + 1, 3, 3))
-    t0 = jnp.zeros((e + 1, 3), dtype)
-
-    # Each element's own transform, all at once; the scan only composes them.
-    slides = jnp.asarray(robot.sliding, dtype)
-    local = jax.vmap(_element_transform, in_axes=(0, 0, 0, 0, 0, None))(
-        robot.origin, robot.dh, angles, springs, slides, robot.lateral_before_joint
-    )
-
-    def body(carry, x):
-        Rs, ts = carry
-        i, parent, R, t = x
-        R, t = _mm(Rs[parent], R), ts[parent] + _mv(Rs[parent], t)
-        return (Rs.at[i].set(R), ts.at[i].set(t)), None
-
-    xs = (jnp.arange(e), parents, *local)
-    (Rs, ts), _ = jax.lax.scan(body, (R0, t0), xs)
-    return Rs[:e], ts[:e]
-
-
-def element_frames(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None = None
-) -> Float[Array, "e 4 4"]:
-    """`element_poses` as `(e, 4, 4)` homogeneous transforms."""
-    R, t = element_poses(robot, q, phi)
-    return jax.vmap(pose_matrix)(R, t)
-
-
-def _points(robot: TreeRobot, q, phi, elements: tuple[int, ...], local) -> Array:
-    R, t = element_poses(robot, q, phi)
-    el = jnp.asarray(elements, int)
-    return _mv(R[el], local) + t[el]
-
-
-def marker_positions(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None = None
-) -> Float[Array, "k 3"]:
-    """Every marker's position in the measurement system's frame (m)."""
-    x = _points(robot, q, phi, robot.marker_element, robot.marker_at)
-    return _mv(rpy_matrix(robot.world[3:]), x) + robot.world[:3]
-
-
-def gravity_potential(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"]
-) -> Float[Array, ""]:
-    """Potential energy of the point masses in gravity, J."""
-    return _gravity(robot, *element_poses(robot, q, phi), q.dtype)
-
-
-def _gravity(robot: TreeRobot, R: Array, t: Array, dtype) -> Array:
-    if not robot.mass_element:
-        return jnp.zeros((), dtype)
-    el = jnp.asarray(robot.mass_element, int)
-    x = _mv(R[el], robot.mass_at) + t[el]
-    return -jnp.sum(robot.mass_kg * _mv(x, robot.gravity))
-
-
-def link_angles(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"]
-) -> Float[Array, " n"]:
-    """Link-side angles `q + θ` (rad) of the active joints, θ the deflection of each
-    joint's drive spring."""
-    rows = [robot.revolute.index(el) for el in robot.drive]
-    return q + phi[jnp.asarray(rows, int), 0]
-
-
-def marker_index(robot: TreeRobot, at: int | str) -> int:
-    """The index of marker `at` (a name or an index), or `ValueError` naming it."""
-    if isinstance(at, str):
-        if at not in robot.marker_names:
-            raise ValueError(f"at: no marker {at!r}; the robot has {list(robot.marker_names)}")
-        return robot.marker_names.index(at)
-    if not 0 <= at < len(robot.marker_names):
-        raise ValueError(f"at: marker index {at} out of range ({len(robot.marker_names)})")
-    return int(at)
-
-
-def marker_pose(
-    robot: TreeRobot, q: Float[Array, " n"], phi: Float[Array, "r 3"] | None, at: int
-) -> tuple[Float[Array, "3 3"], Float[Array, 3]]:
-    """Rotation of marker `at`'s element and the marker's position (m), base frame."""
-    R, t = element_poses(robot, q, phi)
-    el = robot.marker_element[at]
-    return R[el], _mv(R[el], robot.marker_at[at]) + t[el]
 
 
 def law_batches(robot: TreeRobot) -> list[tuple[SpringLaw, Array, Array]]:
@@ -235,7 +92,7 @@ def potential(
     # One pass through the tree serves the masses and the loaded marker (the gradient
     # of the potential is the residual of every equilibrium step).
     R, t = element_poses(robot, q, phi)
-    u = _gravity(robot, R, t, q.dtype)
+    u = gravity_of_frames(robot, R, t, q.dtype)
     for law, joints, rows in law_batches(robot):
         if law.acts_on == "deflection":  # the joint's own spring deflection θ
             u = u + jnp.sum(law.potential(phi[rows, 0]))
@@ -244,8 +101,7 @@ def potential(
         elif law.acts_on != "torque":  # (those enter the balance: `_residual`)
             raise ValueError(f"spring law {law.law!r}: unknown acts_on {law.acts_on!r}")
     if force is not None:
-        el = robot.marker_element[at]
-        u = u - jnp.dot(force, _mv(R[el], robot.marker_at[at]) + t[el])
+        u = u - jnp.dot(force, marker_of_frames(robot, R, t, at))
     return u
 
 

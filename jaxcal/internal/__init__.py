@@ -50,10 +50,8 @@ from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF
 from .._model.kinematics import Ry as Ry
 from .._model.simulate import batch_deflections as batch_deflections
-from .._model.tree_statics import (
-    DERIVATIVE_RTOL as DERIVATIVE_RTOL,
-    gravity_potential as gravity_potential,
-)
+from .._model.tree_kinematics import gravity_potential as gravity_potential
+from .._model.tree_statics import DERIVATIVE_RTOL as DERIVATIVE_RTOL
 from .._robot import URAD as URAD, G as G
 from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._path import compensate_rows as compensate_rows
