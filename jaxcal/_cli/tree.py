@@ -158,7 +158,8 @@ def identify_tree(args: argparse.Namespace) -> int:
         if advice is not None:
             print("\n".join(advice.lines()))
         print(
-            f"RMS 3-D marker error {cal.rms_mm:.3f} mm over {len(data)} rows; "
+            f"RMS 3-D {'deflection' if data.deflection else 'marker'} error {cal.rms_mm:.3f} mm "
+            f"over {len(data)} rows; "
             f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"
         )
         if saved and urdf_out:

@@ -174,7 +174,8 @@ def run(args: argparse.Namespace) -> int:
             row.append("/".join(f"{v:g}" for v in pub) if pub else "")
         table.append(row)
     what = f"{len(splits)} folds" if len(splits) > 1 else f"{len(splits[0][1])} held-out rows"
-    print(f"{robot.name}: {n} rows, {what} (seed {args.seed}); 3-D marker error on held-out rows")
+    kind = "deflection" if data.deflection else "marker"
+    print(f"{robot.name}: {n} rows, {what} (seed {args.seed}); 3-D {kind} error on held-out rows")
     print(
         format_table(head, [[round(v, 2) if isinstance(v, float) else v for v in r] for r in table])
     )
