@@ -36,18 +36,21 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "validate",
-        help="calibrate on part of an absolute-measurement file, report held-out errors",
+        help="calibrate a tree robot on part of a measurement file, report held-out errors",
         description=(
             "Hold out --test rows (drawn by --seed), calibrate the robot on the others "
             "adding the parameter groups in turn (" + ", ".join(DEFAULT_GROUPS) + "; for a "
             "URDF robot origins in place of dh), and "
-            "print the mean, std and max 3-D marker error (mm) on the held-out rows after "
+            "print the mean, std and max 3-D marker (or deflection) error (mm) on the held-out "
+            "rows after "
             "each; with --folds K, K disjoint test sets instead. For Agile Justin the published "
             "figures are printed beside."
         ),
     )
     p.add_argument(
-        "data", metavar="DATA.csv", help="absolute marker measurements (q*_deg, M_x_mm..)"
+        "data",
+        metavar="DATA.csv",
+        help="absolute marker measurements (q*_deg, M_x_mm..) or deflections (dx_mm.., with loads)",
     )
     add_robot_argument(p)
     p.add_argument("--test", type=int, default=200, metavar="N", help="held-out rows (default 200)")
