@@ -11,7 +11,8 @@ empty) was not seen in that row. Optional load columns `fx_N, fy_N, fz_N` and
 frame applied at the robot file's first marker (its tool), beside the robot's own
 weight; without them the robot carries its own weight only (Agile Justin's data).
 Deflection data have `dx_mm, dy_mm, dz_mm` (the first marker's displacement when the
-load is applied, loaded minus unloaded at the same angles, base frame) in place of the
+load is applied, loaded minus unloaded at the same angles, in the measurement frame: the
+robot's base frame where the robot file's `world` is the identity) in place of the
 marker columns, and need the load columns.
 
 Inside, `MarkerData` is SI (rad, m); unseen markers are NaN with `seen` false.
@@ -50,8 +51,8 @@ class MarkerData(eqx.Module):
     - `force`, `moment`: `(n, 3)` wrench applied at the robot's first marker, N and
       N·m, base frame; `None`: none (the robot's own weight only).
     - `deflection`: the measured quantity is the first marker's displacement when the
-      wrench is applied, loaded minus unloaded at the same angles (m, base frame: the
-      deflection data format), not its position; only that marker is seen.
+      wrench is applied, loaded minus unloaded at the same angles (m, measurement frame:
+      the deflection data format), not its position; only that marker is seen.
     - `ids`: row labels.
     """
 

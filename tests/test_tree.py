@@ -15,6 +15,7 @@ Justin (data: Tenhumberg & Bäuml, Humanoids 2021; see tests/data/convert_dlr_ag
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import os
@@ -240,6 +241,12 @@ def test_angle_beyond_limits_is_named(tmp_path, justin):
     path = _write(tmp_path, _header(",left_x_mm,left_y_mm,left_z_mm") + "\n" + q + ",1,2,3\n")
     with pytest.raises(jaxcal.DataError, match="q4_deg: 175 deg is outside the joint limits"):
         jaxcal.read_markers(path, justin)
+
+
+def test_deflections_without_loads_are_refused(justin, data):
+    rows = dataclasses.replace(data.subset(np.arange(5)), deflection=True)
+    with pytest.raises(ValueError, match="deflections without loads"):
+        jaxcal.calibrate_tree(justin, rows, ("joint-compliance",))
 
 
 def test_float32_robot_is_refused(justin, data):

@@ -97,6 +97,8 @@ def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
 def poses(data: MarkerData) -> tuple[Array, Array | None, Array | None]:
     """Each row's commanded angles and its wrench at the first marker (`None` where the
     data have none), as arrays with a leading row axis: what `pose_markers` maps over."""
+    if data.deflection and data.force is None and data.moment is None:
+        raise ValueError("data: deflections without loads (force, moment): nothing deflects")
     force = None if data.force is None else jnp.asarray(data.force)
     moment = None if data.moment is None else jnp.asarray(data.moment)
     return jnp.asarray(data.q), force, moment
