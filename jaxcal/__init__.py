@@ -54,6 +54,7 @@ from ._identification.methods import (
     solve_linear as solve_linear,
 )
 from ._identification.parameter_groups import (
+    DEFLECTION_GROUPS as DEFLECTION_GROUPS,
     PARAMETER_GROUPS as PARAMETER_GROUPS,
     Parameter as Parameter,
     default_groups as default_groups,

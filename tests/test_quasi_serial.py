@@ -300,6 +300,21 @@ def test_deflection_data_calibrate_the_tree_as_the_template_model(fanuc, tmp_pat
     assert abs(out["chi2"] - float(ref.chi2_red) * ref.dof) <= 6 * 0.03**2
 
 
+def test_validate_on_deflection_data_stages_the_springs(fanuc, tmp_path, capsys):
+    """`jaxcal validate` on deflection data adds the spring groups in turn (deflections
+    do not determine the geometry) and fits the FANUC's six joint springs, nothing
+    else: its held-out error is of the order of its training error."""
+    path = tmp_path / "fanuc_tree.json"
+    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
+    args = ["validate", str(DATA / "example_calibration.csv"), "--robot", str(path)]
+    assert main([*args, "--test", "16", "--seed", "0", "--json"]) == 0
+    stages = json.loads(capsys.readouterr().out)["stages"]
+    assert [s["added"] for s in stages] == list(jaxcal.DEFLECTION_GROUPS)
+    first = stages[0]
+    assert first["converged"] and first["fitted"] == 6, first
+    assert first["mean_mm"] <= 2 * first["train_rms_mm"], first
+
+
 def test_lateral_springs_before_or_after_the_joint():
     d = jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))
     q = jnp.asarray(np.linspace(-0.5, 0.5, 19))

@@ -83,7 +83,7 @@ def _run_tree(args: argparse.Namespace) -> int:
         pool,
         args.select,
         criterion=args.criterion,
-        groups=parse_groups(args.params, robot),
+        groups=parse_groups(args.params, robot, pool.deflection),
         priors=priors,
         task=task,
         seed=args.seed,

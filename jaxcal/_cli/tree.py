@@ -56,7 +56,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     if save is not None and urdf_out:  # its sidecar robot file is written beside it
         check_output_path(str(sidecar_path(save)), "--save-robot (its sidecar)")
     robot, data = load_tree_data(args)
-    groups = parse_groups(getattr(args, "params", None), robot)
+    groups = parse_groups(getattr(args, "params", None), robot, data.deflection)
     priors = priors_of(args)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
     cal = calibrate_tree(

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.tree_validation import split_rows, validate_tree
 
     robot, data = load_tree_data(args)
-    groups = parse_groups(args.params, robot)
+    groups = parse_groups(args.params, robot, data.deflection)
     priors = priors_of(args)
     n = len(data)
     if args.folds is not None:

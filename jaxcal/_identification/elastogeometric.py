@@ -308,7 +308,7 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
     t0 = time.perf_counter()
-    groups = default_groups(robot) if groups is None else groups
+    groups = default_groups(robot, data.deflection) if groups is None else groups
     fit_groups = groups if fit_groups is None else fit_groups
     table = parameter_table(robot, groups)
     names = {p.name for p in table}

@@ -80,7 +80,7 @@ def validate_tree(
     that Levenberg–Marquardt does not leave within its step budget. `priors` as in
     `calibrate_tree`, for the groups a stage fits."""
     out: list[Stage] = []
-    groups = default_groups(robot) if groups is None else groups
+    groups = default_groups(robot, train.deflection) if groups is None else groups
     for k in range(1, len(groups) + 1):
         cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors)
         e = marker_errors(cal.robot, test) * 1e3

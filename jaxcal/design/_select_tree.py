@@ -72,7 +72,7 @@ def select_tree_rows(
         raise ValueError("the task criterion needs the task's rows (task=...)")
     if not 1 <= k <= len(pool.q):
         raise ValueError(f"k must be in 1..{len(pool.q)} (the pool's rows), got {k}")
-    groups = default_groups(robot) if groups is None else groups
+    groups = default_groups(robot, pool.deflection) if groups is None else groups
     table = parameter_table(robot, groups)
     std = prior_stds(robot, table, priors)
     has_prior = np.isfinite(std)
