@@ -61,6 +61,7 @@ __all__ = [
     "observations",
     "poses",
     "pose_markers",
+    "predict_rows",
     "scaled_jacobian",
 ]
 
@@ -118,9 +119,13 @@ def pose_markers(
     return y - y0, ok & ok0
 
 
+def predict_rows(robot: TreeRobot, x, deflection: bool = False):
+    """`pose_markers` at every row of `poses(data)` (traceable): `(n, k, 3)` and `(n,)`."""
+    return split_map(lambda r, pose: pose_markers(r, pose, deflection), robot, x)
+
+
 def _predict(robot: TreeRobot, table, p, x, deflection, rows, markers):
-    r = set_vector(robot, table, p)
-    y, ok = split_map(lambda r, x: pose_markers(r, x, deflection), r, x)
+    y, ok = predict_rows(set_vector(robot, table, p), x, deflection)
     return y[rows, markers], ok
 
 

@@ -9,18 +9,15 @@ from typing import NamedTuple
 import equinox as eqx
 import numpy as np
 
-from .._batching import split_map
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from .elastogeometric import TreeCalibration, calibrate_tree, observations, pose_markers, poses
+from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
 from .parameter_groups import PriorSpec, default_groups
 
 __all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_markers"]
 
 
-@eqx.filter_jit
-def _markers_of(robot: TreeRobot, x, deflection: bool):
-    return split_map(lambda r, x: pose_markers(r, x, deflection), robot, x)
+_markers_of = eqx.filter_jit(predict_rows)
 
 
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,8 @@ error (m²) the calibration leaves on the task's poses.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._identification.elastogeometric import observations, scaled_jacobian
@@ -84,14 +86,8 @@ def select_tree_rows(
     W = None
     if criterion == "task":
         assert task is not None
-        unit = MarkerData(
-            q=task.q,
-            markers=None,
-            seen=task.seen,
-            sigma=np.ones(len(task.q)),
-            force=task.force,
-            moment=task.moment,
-        )
+        # The task's rows as they are (poses, loads, kind), unit σ, no measurements.
+        unit = dataclasses.replace(task, markers=None, sigma=np.ones(len(task.q)))
         Jt = scaled_jacobian(robot, table, unit)[:, :, cols]  # m per typical size
         W = np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
     ones = np.ones(len(pool.q))  # obs is already σ-weighted
