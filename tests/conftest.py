@@ -175,9 +175,9 @@ def _release_compiled_programs():
 
 
 @contextlib.contextmanager
-def _optimisations_on():
+def _optimisations_on(on: bool = True):
     before = jax.config.values["jax_disable_most_optimizations"]
-    jax.config.update("jax_disable_most_optimizations", False)
+    jax.config.update("jax_disable_most_optimizations", not on)
     try:
         yield
     finally:
@@ -194,7 +194,9 @@ def optimised_programs():
 @pytest.fixture(scope="session")
 def optimisations():
     """`with optimisations():` LLVM's optimisations on for the compiles inside (a module
-    fixture's long-running programs, where the function-scoped fixture cannot be used)."""
+    fixture's long-running programs, where the function-scoped fixture cannot be used);
+    `with optimisations(False):` off, for a program that runs once in a file or test
+    that has them on."""
     return _optimisations_on
 
 
