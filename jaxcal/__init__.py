@@ -178,10 +178,12 @@ from ._parameters import (
     set_parameters as set_parameters,
 )
 from ._robot import (
-    PRESETS as PRESETS,
     AbstractEffect as AbstractEffect,
     Experiment as Experiment,
     Robot as Robot,
+)
+from ._robot_file import (
+    PRESETS as PRESETS,
     load_robot as load_robot,
     robot_from_dict as robot_from_dict,
     robot_to_dict as robot_to_dict,

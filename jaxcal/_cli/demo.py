@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.identify import identify
     from .._model.simulate import simulate
     from .._parameters import get_parameters
-    from .._robot import load_robot
+    from .._robot_file import load_robot
     from .identify import advise
 
     robot = load_robot("fanuc_m900ib700")

@@ -10,6 +10,14 @@ import sys
 import numpy as np
 
 from .._format import format_table
+from .design_options import (
+    design_sizes,
+    group_sizes,
+    group_sizes_option,
+    level_values,
+    pool_option,
+    q2_levels_option,
+)
 from .evaluate import STD_HEADS, std_rows
 from .main import (
     add_prior_argument,
@@ -89,7 +97,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--group-sizes",
-        type=_sizes_list,
+        type=group_sizes_option,
         default=None,
         metavar="A,B,..",
         help="configurations per q2 group, e.g. 4,5,3 (sums to the number of distinct "
@@ -126,7 +134,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed, default=0, metavar="S", help="seed of the starts (0)")
     p.add_argument(
         "--pool",
-        type=_pool,
+        type=pool_option,
         default=0,
         metavar="N|CANDIDATES.csv",
         help="a number N: evaluate N random feasible designs first, start from the best, and "
@@ -171,82 +179,9 @@ def register(sub) -> None:
     p.set_defaults(func=run_design)
 
 
-def _sizes(args: argparse.Namespace) -> tuple[int, int]:
-    # (distinct configurations, repeats) from --configs / --distinct / --repeats.
-    r = args.repeats
-    if r < 1:
-        raise ValueError(f"--repeats must be positive, got {r}")
-    if args.distinct is not None:
-        n = args.distinct
-        if args.configs is not None and args.configs != n * r:
-            raise ValueError(
-                f"--configs {args.configs} != --distinct {n} x --repeats {r}; give two of them"
-            )
-    else:
-        m = 12 if args.configs is None else args.configs
-        if m % r:
-            raise ValueError(f"--configs {m} is not a multiple of --repeats {r}")
-        n = m // r
-    if n < 1:
-        raise ValueError(f"the number of distinct configurations must be positive, got {n}")
-    return n, r
-
-
-def _levels(text: str) -> str | tuple[float | None, ...]:
-    # --q2-levels: 'span', 'free' or a comma list of deg values and '-' (optimised).
-    if text in ("span", "free"):
-        return text
-    out: list[float | None] = []
-    for part in text.split(","):
-        part = part.strip()
-        if part == "-":
-            out.append(None)
-            continue
-        try:
-            out.append(float(part))
-        except ValueError:
-            raise ValueError(
-                f"--q2-levels: {part!r} is not a number or '-' (use 'span', 'free' or e.g. "
-                "-30,-,90)"
-            ) from None
-    return tuple(out)
-
-
-def _sizes_list(text: str) -> tuple[int, ...]:
-    # --group-sizes: a comma list of positive integers.
-    try:
-        sizes = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a comma list of integers (e.g. 4,5,3)"
-        ) from None
-    if not sizes or min(sizes) < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: every group needs at least one configuration")
-    return sizes
-
-
-def _level_values(d) -> list[float]:
-    # The design's distinct q2 values (deg), ascending.
-    return sorted({round(float(v), 6) for v in np.rad2deg(d.q[:, 1])})
-
-
-def _group_sizes(d) -> list[int]:
-    # Configurations per distinct q2 value, in the order of `_level_values`.
-    q2 = np.round(np.rad2deg(d.q[:, 1]), 6)
-    return [int(np.sum(q2 == v)) for v in _level_values(d)]
-
-
-def _pool(text: str) -> int | str:
-    """`--pool`: a count of random designs, or a candidate file."""
-    try:
-        return int(text)
-    except ValueError:
-        return text
-
-
 def run_design(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
-    from .._robot import load_robot
+    from .._robot_file import load_robot
     from ..design._optimise import optimise_design
     from ..design._parameter_sets import resolve_parameters
 
@@ -268,7 +203,7 @@ def run_design(args: argparse.Namespace) -> int:
             )
     elif args.task:
         raise ValueError("--task TASK.csv goes with --criterion task")
-    n, reps = _sizes(args)
+    n, reps = design_sizes(args)
     if args.starts < 1 or args.steps < 1 or args.pool < 0 or args.bound_pool < 0:
         raise ValueError("--starts and --steps must be positive, --pool and --bound-pool >= 0")
     if args.level_gap < 0:
@@ -305,7 +240,7 @@ def run_design(args: argparse.Namespace) -> int:
         model=args.model,
         repeats=reps,
         level_gap_deg=args.level_gap,
-        q2_levels=_levels(args.q2_levels),
+        q2_levels=q2_levels_option(args.q2_levels),
         bound_pool=args.bound_pool,
         task=task,
     )
@@ -349,8 +284,8 @@ def _report_design(args: argparse.Namespace, d, reps: int) -> int:
                 "bound_pool": None if d.bound is None else d.bound.pool_size,
                 "distinct": len(d.q),
                 "repeats": reps,
-                "q2_levels_deg": _level_values(d),
-                "group_sizes": _group_sizes(d),
+                "q2_levels_deg": level_values(d),
+                "group_sizes": group_sizes(d),
                 "configs_deg": np.rad2deg(d.q),
                 "loads_N": d.force,
                 "std": dict(zip(c.names, np.asarray(c.std).tolist(), strict=True)),
@@ -378,9 +313,9 @@ def _report_design(args: argparse.Namespace, d, reps: int) -> int:
             f"approximate-design bound {d.bound.value:.6g} over {d.bound.pool_size} candidates"
             f"   efficiency {eff:.3f}"
         )
-    levels = _level_values(d)
+    levels = level_values(d)
     if len(levels) < len(q):
-        shown = ", ".join(f"{v:g} ({k}x)" for v, k in zip(levels, _group_sizes(d), strict=True))
+        shown = ", ".join(f"{v:g} ({k}x)" for v, k in zip(levels, group_sizes(d), strict=True))
         print(f"q2 levels (deg): {shown}   (--q2-levels {args.q2_levels})")
     if reps > 1:
         print(f"{len(q)} distinct configurations, each measured {reps} times")

@@ -83,7 +83,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._io import read_dataset
     from .._model.robot_files import is_tree_file
-    from .._robot import load_robot
+    from .._robot_file import load_robot
 
     if is_tree_file(args.robot):
         return run_tree(args)

@@ -134,7 +134,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
     from .._io import read_dataset
     from .._plausibility import merged_q2_levels
-    from .._robot import load_robot
+    from .._robot_file import load_robot
     from ..design._bound import design_bound
     from ..design._constraints import CONSTRAINTS, constraint_values
     from ..design._criteria import design_criteria

@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.identify import identify
     from .._io import read_dataset
     from .._model.robot_files import is_tree_file
-    from .._robot import load_robot
+    from .._robot_file import load_robot
 
     check_output_path(
         args.save_robot,

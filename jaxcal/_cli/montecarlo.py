@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .._identification.result import resolve_name
     from .._io import read_dataset
-    from .._robot import load_robot
+    from .._robot_file import load_robot
     from ..montecarlo._processes import join_processes, run_local_processes
     from ..montecarlo._study import monte_carlo
 

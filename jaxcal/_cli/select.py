@@ -22,7 +22,7 @@ _STARTS = {
 
 def run_select(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
-    from .._robot import load_robot
+    from .._robot_file import load_robot
     from ..design import SELECT_CRITERIA, select_from_pool
 
     if args.criterion not in SELECT_CRITERIA:

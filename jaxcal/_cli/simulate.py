@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from .._model.robot_files import is_tree_file
     from .._model.simulate import simulate
     from .._plausibility import load_beyond_limit
-    from .._robot import load_robot
+    from .._robot_file import load_robot
 
     check_output_path(
         args.output,

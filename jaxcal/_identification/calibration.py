@@ -25,7 +25,8 @@ from jaxtyping import Array, Float
 
 from .._io import atomic_file
 from .._parameters import get_parameters, set_parameters
-from .._robot import Robot, load_robot_dict, robot_from_dict, robot_to_dict
+from .._robot import Robot
+from .._robot_file import load_robot_dict, robot_from_dict, robot_to_dict
 from .result import IdentificationResult
 
 __all__ = [

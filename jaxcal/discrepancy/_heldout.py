@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._supermodel import MAX_STEPS, BatchFit, SuperModel
+from ._batch_fit import BatchFit
+from ._supermodel import MAX_STEPS, SuperModel
 
 __all__ = ["LEVERAGE_MAX", "heldout_residuals", "press"]
 

@@ -20,10 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._model.candidates import Candidate
+from ._batch_fit import BatchFit
 from ._heldout import heldout_residuals
 from ._report import DECISIVE_BIC, rms_mm
 from ._screening import secant_columns
-from ._supermodel import SLOTS, BatchFit, SuperModel
+from ._supermodel import SLOTS, SuperModel
 
 __all__ = ["FirstFit", "look_again"]
 

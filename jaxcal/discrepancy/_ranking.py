@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._batch_fit import BatchFit
 from ._report import (
     DECISIVE_BIC,
     CandidateResult,
@@ -14,7 +15,6 @@ from ._report import (
     residual_structure,
     rms_mm,
 )
-from ._supermodel import BatchFit
 
 __all__ = ["rank_candidates", "build_report"]
 

@@ -25,7 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._model.candidates import Candidate
-from ._supermodel import BatchFit, SuperModel
+from ._batch_fit import BatchFit
+from ._supermodel import SuperModel
 
 __all__ = ["PRELOAD_FACTORS", "linear_screen", "preload_scan", "secant_columns"]
 

@@ -60,6 +60,7 @@ from ..design._observation import screw_jacobian as screw_jacobian
 from ..design._problem import problem_criteria as problem_criteria
 from ..design._reference import pool_values as pool_values
 from ..design._select import pool_bound as pool_bound
+from ..discrepancy._batch_fit import BatchFit as BatchFit
 from ..discrepancy._heldout import (
     LEVERAGE_MAX as LEVERAGE_MAX,
     heldout_residuals as heldout_residuals,
@@ -71,7 +72,6 @@ from ..discrepancy._screening import (
     candidate_free as candidate_free,
     preload_scan as preload_scan,
 )
-from ..discrepancy._supermodel import BatchFit as BatchFit
 from ..discrepancy._t_optimal import (
     greedy_t_rows as greedy_t_rows,
     lack_of_fit as lack_of_fit,
