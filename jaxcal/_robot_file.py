@@ -1,6 +1,8 @@
 """Reading and writing the robot file of a `Robot` (the FANUC-form model): every key
 checked, a misspelt one named with the nearest known one, the units in the key names
-converted to SI; built-in presets by name (`PRESETS`).
+converted to SI; built-in presets by name (`PRESETS`). The same files read as the
+general model (`TreeRobot`), and tree robot files and URDFs, go through
+`_model/robot_files.py`.
 """
 
 from __future__ import annotations

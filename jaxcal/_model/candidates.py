@@ -23,7 +23,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._robot import URAD, AbstractEffect, Robot
-from .kinematics import so3_exp
+from .rotations import so3_exp
 
 __all__ = [
     "LinkBending",

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .kinematics import Rx, Ry, Rz
+from .rotations import Rx, Ry, Rz
 from .tree import TreeRobot
 
 __all__ = [

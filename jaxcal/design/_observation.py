@@ -44,7 +44,8 @@ from .._model.equilibrium import (
     tool_pose,
     total_potential,
 )
-from .._model.kinematics import Rx, forward, jacobian_theta
+from .._model.kinematics import forward, jacobian_theta
+from .._model.rotations import Rx
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
 

@@ -1,0 +1,55 @@
+"""Elementary rotations: about the coordinate axes, and of a rotation vector
+(Rodrigues' formula, exact to second order at zero), shared by the models' kinematics.
+Each handles one angle or vector; batch with `jax.vmap`."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+__all__ = ["Rx", "Ry", "Rz", "skew", "so3_exp"]
+
+
+def Rx(a: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """Rotation by `a` (rad) about x."""
+    c, s = jnp.cos(a), jnp.sin(a)
+    o, z = jnp.ones_like(a), jnp.zeros_like(a)
+    return jnp.stack([jnp.stack([o, z, z]), jnp.stack([z, c, -s]), jnp.stack([z, s, c])])
+
+
+def Ry(a: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """Rotation by `a` (rad) about y."""
+    c, s = jnp.cos(a), jnp.sin(a)
+    o, z = jnp.ones_like(a), jnp.zeros_like(a)
+    return jnp.stack([jnp.stack([c, z, s]), jnp.stack([z, o, z]), jnp.stack([-s, z, c])])
+
+
+def Rz(a: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """Rotation by `a` (rad) about z."""
+    c, s = jnp.cos(a), jnp.sin(a)
+    o, z = jnp.ones_like(a), jnp.zeros_like(a)
+    return jnp.stack([jnp.stack([c, -s, z]), jnp.stack([s, c, z]), jnp.stack([z, z, o])])
+
+
+def skew(v: Float[Array, 3]) -> Float[Array, "3 3"]:
+    """The matrix of `v ×`."""
+    z = jnp.zeros_like(v[0])
+    return jnp.stack(
+        [jnp.stack([z, -v[2], v[1]]), jnp.stack([v[2], z, -v[0]]), jnp.stack([-v[1], v[0], z])]
+    )
+
+
+def so3_exp(r: Float[Array, 3]) -> Float[Array, "3 3"]:
+    """Rotation matrix of the rotation vector `r` (rad), Rodrigues' formula.
+
+    Uses the Taylor series near zero so that value and derivatives are exact at `r = 0`
+    (the point where every virtual spring starts).
+    """
+    t2 = jnp.sum(r * r)
+    small = t2 < 1e-8
+    t2s = jnp.where(small, 1.0, t2)
+    t = jnp.sqrt(t2s)
+    a = jnp.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, jnp.sin(t) / t)
+    b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2s)
+    K = skew(r)
+    return jnp.eye(3, dtype=r.dtype) + a * K + b * (K @ K)
