@@ -398,29 +398,21 @@ def test_task_design_efficiency(robot, task_design):
 
 
 @eqx.filter_jit
-def _compensation_errors(robot, model, params, q, force):
-    # Per parameter vector of `model` (rows of `params`): the RMS over the path's rows of
-    # the true robot's (`robot`) tool-point error against its programmed pose when
-    # commanded the angles with which the model so set compensates `force`, and whether
-    # it compensated every row. One program for every trial.
-    def trial(p):
-        fitted = jaxcal.set_parameters(model, p)
+def _compensation_error(robot, fitted, q, force):
+    # RMS over the rows of the true robot's (`robot`) tool-point error against its
+    # programmed pose when commanded the angles with which `fitted` compensates `force`,
+    # and whether `fitted` compensated every row.
+    def row(qt, f):
+        c = compensate_row(fitted, qt, f)
+        e, landed = landing_error(robot, c.qc, qt, f)
+        return e, landed & (c.result == jaxcal.RESULTS.successful)
 
-        def row(qt, f):
-            c = compensate_row(fitted, qt, f)
-            e, landed = landing_error(robot, c.qc, qt, f)
-            return e, landed & (c.result == jaxcal.RESULTS.successful)
-
-        e, ok = jax.vmap(row)(q, force)
-        return jnp.sqrt(jnp.mean(jnp.sum(e**2, axis=1))), jnp.all(ok)
-
-    return jax.vmap(trial)(params)
+    e, ok = jax.vmap(row)(q, force)
+    return jnp.sqrt(jnp.mean(jnp.sum(e**2, axis=1))), jnp.all(ok)
 
 
 @pytest.mark.slow
-def test_task_design_proven_by_repeated_experiments(
-    robot, default_design, task_design, optimisations
-):
+def test_task_design_proven_by_repeated_experiments(robot, default_design, task_design, request):
     # The task design against the default design and the median (by the task criterion)
     # of 200 random designs, as `benchmarks/bench_task_proof.py` runs them: the robot as
     # built has every parameter off its file's value by a fixed factor; each design is
@@ -451,30 +443,31 @@ def test_task_design_proven_by_repeated_experiments(
         c = design_criteria(robot, ds.q, ds.force, parameters="physical", sigma=ds.sigma)
         free = [n for n, r in zip(c.names, np.asarray(c.relative_std), strict=True) if r <= 0.1]
         studies[label] = ds, free, jaxcal.model_deflections(true, ds)
+    request.getfixturevalue("optimised_test")
     qp, fp = jnp.asarray(path.q[::4]), jnp.asarray(path.force[::4])
     p0 = np.asarray(jaxcal.get_parameters(robot))
     err = {}
     for label, (ds, free, clean) in studies.items():
-        # The fits run long: compiled with LLVM's optimisations; the compensations of
-        # every trial are one call, compiled without them.
-        with optimisations():
-            mc = jaxcal.monte_carlo(
-                robot,
-                ds,
-                trials=200,
-                method="nonlinear",
-                free=free,
-                seed=7,
-                keep_estimates=True,
-                clean=clean,
-            )
+        mc = jaxcal.monte_carlo(
+            robot,
+            ds,
+            trials=200,
+            method="nonlinear",
+            free=free,
+            seed=7,
+            keep_estimates=True,
+            clean=clean,
+        )
         assert mc.failed == 0, label
         cols = [robot.parameter_names.index(n) for n in mc.names]
-        P = np.tile(p0, (len(mc.estimates), 1))
-        P[:, cols] = mc.estimates
-        rms, ok = _compensation_errors(true, robot, jnp.asarray(P), qp, fp)
-        assert np.all(np.asarray(ok)), label
-        err[label] = np.asarray(rms)
+        e = []
+        for est in mc.estimates:
+            p = p0.copy()
+            p[cols] = est
+            rms, ok = _compensation_error(true, jaxcal.set_parameters(robot, p), qp, fp)
+            assert bool(ok), label
+            e.append(float(rms))
+        err[label] = np.asarray(e)
     for other, claim in (("default", 0.8), ("random", 0.6)):
         lr, se_log = _log_rms_ratio(err["task"] ** 2, err[other] ** 2)
         ratio = float(np.exp(lr))
