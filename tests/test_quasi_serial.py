@@ -315,6 +315,48 @@ def test_validate_on_deflection_data_stages_the_springs(fanuc, tmp_path, capsys)
     assert first["mean_mm"] <= 2 * first["train_rms_mm"], first
 
 
+def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tmp_path, capsys):
+    """`jaxcal design --pool --select` on deflection data for the FANUC as a tree: the
+    chosen rows determine the six joint springs (the deflection groups, as identify
+    fits them) better than the median random subset of as many, and are written as the
+    pool's own rows, deflections included."""
+    path = tmp_path / "fanuc_tree.json"
+    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
+    pool = DATA / "example_calibration.csv"
+    out = tmp_path / "chosen.csv"
+    args = ["design", "--robot", str(path), "--pool", str(pool), "--select", "12"]
+    assert main([*args, "--json", "-o", str(out)]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["parameters"] == [f"J{i}.k_theta" for i in range(1, 7)]
+    assert d["full_rank"] and len(set(d["rows"])) == 12
+    assert 0 < d["efficiency"] <= 1.0 + 1e-9 and d["value"] < d["random_median"]
+    rows = np.asarray(d["rows"]) - 1
+    chosen = jaxcal.read_markers(out, fanuc[1])
+    whole = jaxcal.read_markers(pool, fanuc[1])
+    assert chosen.deflection and whole.deflection
+    np.testing.assert_allclose(chosen.q, whole.q[rows], atol=1e-7)
+    np.testing.assert_allclose(chosen.markers, whole.markers[rows], atol=1e-9)
+    np.testing.assert_allclose(chosen.force, whole.force[rows], atol=1e-6)
+
+
+def test_discover_on_deflection_data_of_the_tree(fanuc, tmp_path, capsys):
+    """`jaxcal discover` on the example's deflections with the FANUC as a tree: its data
+    come from the model itself (the compensator included) with noise, so no candidate
+    is decisive (ΔBIC ≥ 10 on noise alone has probability ~1e-5 per family), as the
+    FANUC-form model's discover answers on the same file. Deflections do not determine
+    the geometry: the nominal model is the spring groups, as for identify."""
+    path = tmp_path / "fanuc_tree.json"
+    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
+    args = ["discover", str(DATA / "example_calibration.csv"), "--robot", str(path), "--json"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    # Fitted from deflections the nominal model is the spring groups, as identify's.
+    assert out["nominal_groups"] == list(jaxcal.DEFLECTION_GROUPS)
+    assert out["effect"] == "none" and out["effects"] == [], out["effect"]
+    best = out["steps"][0]
+    assert not best["chosen"] and best["delta_bic"] < 10, best
+
+
 def test_lateral_springs_before_or_after_the_joint():
     d = jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))
     q = jnp.asarray(np.linspace(-0.5, 0.5, 19))

@@ -18,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="GROUPS",
         help="robots given as a kinematic tree: the nominal model's parameter groups, "
-        "comma-separated (default: the full calibration); the search looks among the others",
+        "comma-separated (default: the full calibration; for deflection data the spring groups, "
+        "jaxcal.DEFLECTION_GROUPS); the search looks among the others",
     )
     p.add_argument(
         "--candidates",
@@ -104,9 +105,9 @@ def run_tree(args: argparse.Namespace) -> int:
     check_outputs(args)
     robot, data = load_tree_data(args)
     pool = None if args.pool is None else read_markers(args.pool, robot, require_markers=False)
-    nominal = parse_groups(args.params, robot)
+    nominal = parse_groups(args.params, robot, data.deflection)
     look = (
-        (*parse_groups(None, robot), "masses", "spring-laws")
+        (*parse_groups(None, robot, data.deflection), "masses", "spring-laws")
         if args.candidates is None
         else parse_groups(args.candidates, robot)
     )

@@ -230,7 +230,8 @@ def discover_tree(
     `data` (absolute marker measurements), or none (see the module docstring).
 
     `candidates`: the families to try (default: `tree_candidates` of the parameter
-    `groups`, default those of the full calibration, masses and spring laws; where spring
+    `groups`, default those of the full calibration (`default_groups`: the spring
+    groups for deflection data), masses and spring laws; where spring
     laws are candidates, a joint-stiffness nonlinearity and backlash on every joint too,
     and a gravity compensator on each joint named in `compensators`: `candidate_robot`);
     `rounds`: how many times the search looks again after a nonlinear refit.
@@ -252,7 +253,9 @@ def discover_tree(
     if unknown:
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     if candidates is None:
-        look = (*default_groups(robot), "masses", "spring-laws") if groups is None else groups
+        look = groups
+        if look is None:
+            look = (*default_groups(robot, data.deflection), "masses", "spring-laws")
         if "spring-laws" in look and "spring-laws" not in nominal:
             robot = candidate_robot(robot, compensators)
         elif compensators:
