@@ -230,10 +230,10 @@ def discover_tree(
     `data` (absolute marker measurements), or none (see the module docstring).
 
     `candidates`: the families to try (default: `tree_candidates` of the parameter
-    `groups`, default those of the full calibration (`default_groups`: the spring
-    groups for deflection data), masses and spring laws; where spring
-    laws are candidates, a joint-stiffness nonlinearity and backlash on every joint too,
-    and a gravity compensator on each joint named in `compensators`: `candidate_robot`);
+    `groups`, default those of the full calibration (`default_groups`: the spring groups
+    for deflection data), masses and spring laws; where spring laws are candidates, a
+    joint-stiffness nonlinearity and backlash on every joint too, and a gravity
+    compensator on each joint named in `compensators`: `candidate_robot`);
     `rounds`: how many times the search looks again after a nonlinear refit.
     `discriminate`: where a named family's runner-up fits about as well, choose that
     many poses of `pool` (default random poses within the limits, drawn by `seed`) that
