@@ -99,7 +99,7 @@ def run_tree(args: argparse.Namespace) -> int:
     from .._identification.tree_validation import marker_errors, split_rows
     from .._markers import read_markers
     from ..discrepancy._tree import discover_tree
-    from ..discrepancy._tree_candidates import candidate_robot, tree_candidates
+    from ..discrepancy._tree_candidates import candidate_groups, candidate_robot, tree_candidates
 
     check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
     check_outputs(args)
@@ -107,7 +107,7 @@ def run_tree(args: argparse.Namespace) -> int:
     pool = None if args.pool is None else read_markers(args.pool, robot, require_markers=False)
     nominal = parse_groups(args.params, robot, data.deflection)
     look = (
-        (*parse_groups(None, robot, data.deflection), "masses", "spring-laws")
+        candidate_groups(robot, data.deflection)
         if args.candidates is None
         else parse_groups(args.candidates, robot)
     )

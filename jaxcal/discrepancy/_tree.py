@@ -49,7 +49,6 @@ from .._identification.elastogeometric import (
 )
 from .._identification.parameter_groups import (
     GROUPS,
-    default_groups,
     get_vector,
     parameter_table,
 )
@@ -60,7 +59,12 @@ from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from ._heldout import press
 from ._report import DECISIVE_BIC
-from ._tree_candidates import candidate_robot, positive_parameters, tree_candidates
+from ._tree_candidates import (
+    candidate_groups,
+    candidate_robot,
+    positive_parameters,
+    tree_candidates,
+)
 from ._tree_discriminate import discriminate_tree
 from ._tree_report import TreeCandidate, TreeDiscovery, TreeEffect
 
@@ -230,10 +234,10 @@ def discover_tree(
     `data` (absolute marker measurements), or none (see the module docstring).
 
     `candidates`: the families to try (default: `tree_candidates` of the parameter
-    `groups`, default those of the full calibration (`default_groups`: the spring groups
-    for deflection data), masses and spring laws; where spring laws are candidates, a
-    joint-stiffness nonlinearity and backlash on every joint too, and a gravity
-    compensator on each joint named in `compensators`: `candidate_robot`);
+    `groups`, default `candidate_groups`: the full calibration's, masses and spring
+    laws; where spring laws are candidates, a joint-stiffness nonlinearity and backlash
+    on every joint too, and a gravity compensator on each joint named in `compensators`:
+    `candidate_robot`);
     `rounds`: how many times the search looks again after a nonlinear refit.
     `discriminate`: where a named family's runner-up fits about as well, choose that
     many poses of `pool` (default random poses within the limits, drawn by `seed`) that
@@ -253,9 +257,7 @@ def discover_tree(
     if unknown:
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     if candidates is None:
-        look = groups
-        if look is None:
-            look = (*default_groups(robot, data.deflection), "masses", "spring-laws")
+        look = candidate_groups(robot, data.deflection) if groups is None else groups
         if "spring-laws" in look and "spring-laws" not in nominal:
             robot = candidate_robot(robot, compensators)
         elif compensators:

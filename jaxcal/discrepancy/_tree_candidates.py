@@ -26,12 +26,24 @@ from .._model.spring_laws import CompensatorLaw, JointBacklash, JointHardening
 from .._model.tree import TreeRobot
 from ._tree_report import TreeCandidate
 
-__all__ = ["tree_candidates", "candidate_robot", "positive_parameters", "COMPENSATOR_ARMS"]
+__all__ = [
+    "tree_candidates",
+    "candidate_groups",
+    "candidate_robot",
+    "positive_parameters",
+    "COMPENSATOR_ARMS",
+]
 
 #: Lever arms `(lc, l2)` (m) of a candidate compensator (`candidate_robot`): only
 #: `Kc·lc·l2` matters while its free length is 0; unequal, so that the spring's length
 #: never reaches 0 (where it has no derivative).
 COMPENSATOR_ARMS = (0.1, 0.2)
+
+
+def candidate_groups(robot: TreeRobot, deflection: bool = False) -> tuple[str, ...]:
+    """The groups the search looks in by default: those of the full calibration
+    (`default_groups`: the spring groups for deflection data), masses and spring laws."""
+    return (*default_groups(robot, deflection), "masses", "spring-laws")
 
 
 def _owner(robot: TreeRobot, p: Parameter) -> str:
