@@ -623,9 +623,12 @@ table = jaxcal.parameter_table(robot, jaxcal.default_groups(robot))
 y, ok = jaxcal.predicted_markers(robot, data)
 J = scaled_jacobian(robot, table, data)
 fanuc = jaxcal.load_tree("fanuc_m900ib700")  # few springs: the formed implicit solve
-deflections = jaxcal.read_markers(sys.argv[3], fanuc).subset(np.arange(7))
+loaded = jaxcal.read_markers(sys.argv[3], fanuc).subset(np.arange(7))
+plan = jaxcal.MarkerData(
+    loaded.q, None, np.ones((7, 1), bool), loaded.sigma, loaded.force, loaded.moment
+)
 ftable = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
-Jf = scaled_jacobian(fanuc, ftable, deflections)
+Jf = scaled_jacobian(fanuc, ftable, plan)
 np.savez(sys.argv[2], y=y, ok=ok, J=J, Jf=Jf, devices=jax.device_count())
 """
 
@@ -660,10 +663,12 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     np.testing.assert_array_equal(two["ok"], ok)
     J = scaled_jacobian(justin, table, sub)
     np.testing.assert_allclose(two["J"], J, rtol=0, atol=JACOBIAN_RTOL * np.abs(J).max())
-    # The FANUC's deflections: its Jacobian's implicit solve is formed and factored, exact
-    # but for round-off and the fixed point's 1e-12.
+    # The FANUC's tool under the example's loads: its Jacobian's implicit solve is formed
+    # and factored, exact but for round-off and the fixed point's 1e-12. (Positions, not
+    # deflections: one equilibrium per pose instead of two, a smaller program.)
     fanuc = jaxcal.load_tree("fanuc_m900ib700")
     sub = jaxcal.read_markers(EXAMPLE, fanuc).subset(np.arange(7))
+    plan = jaxcal.MarkerData(sub.q, None, np.ones((7, 1), bool), sub.sigma, sub.force, sub.moment)
     table = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
-    J = scaled_jacobian(fanuc, table, sub)
+    J = scaled_jacobian(fanuc, table, plan)
     np.testing.assert_allclose(two["Jf"], J, rtol=0, atol=1e-9 * np.abs(J).max())
