@@ -112,11 +112,19 @@ def pose_markers(
     with `deflection` every marker's displacement when the load is applied (loaded minus
     unloaded at the same angles; the deflection data format)."""
     q, force, moment = pose
-    y, ok = predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
     if not deflection:
-        return y, ok
-    y0, ok0 = predict_markers(robot, q, derivative_rtol=derivative_rtol)
-    return y - y0, ok & ok0
+        return predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
+    # Both equilibria as one batch of two wrenches (the unloaded one zero): one trace of
+    # the equilibrium and its derivative instead of two, for the same numbers.
+    zero = jnp.zeros(3, q.dtype)
+    f = jnp.stack([zero if force is None else force, zero])
+    m = jnp.stack([zero if moment is None else moment, zero])
+
+    def at(f, m):
+        return predict_markers(robot, q, f, m, derivative_rtol=derivative_rtol)
+
+    y, ok = jax.vmap(at)(f, m)
+    return y[0] - y[1], ok[0] & ok[1]
 
 
 def predict_rows(robot: TreeRobot, x, deflection: bool = False):
