@@ -7,7 +7,8 @@ Run `python notebooks/_discrepancy_study.py` to (re)write
 with `--perturbed`, the true nominal parameters are off the robot file's by a fixed
 ±15 % draw and the output is `05_discrepancy_study_perturbed.json`.
 `benchmarks/bench_discrepancy_study.py` runs it and reports the statistics that
-tests/test_discrepancy.py checks on the first seed of every case (`run_study`).
+tests/test_discrepancy.py checks on the first seed of one case per candidate family and
+one pair (`TEST_CASES`).
 """
 
 from __future__ import annotations

@@ -120,7 +120,7 @@ file that declares none — in 10 noise seeds, plus 10 seeds with no effect, and
 full workflow (all candidates) on each. It takes minutes, so this notebook loads its
 precomputed output `05_discrepancy_study.json` (`benchmarks/bench_discrepancy_study.py`
 reruns it and reports its statistics; tests/test_discrepancy.py runs the same workflow on
-the first seed of every case).
+the first seed of one case per family and one pair).
 
 **How big is a hidden effect?** Each effect is sized by the *gap it leaves*: the largest
 row residual, after the nominal model (every compliance and the compensator
