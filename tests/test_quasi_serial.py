@@ -49,6 +49,14 @@ def fanuc():
     return _pair()
 
 
+@pytest.fixture(scope="module")
+def tree_file(fanuc, tmp_path_factory):
+    """The FANUC as a tree, written as a robot file (what `--robot` reads)."""
+    path = tmp_path_factory.mktemp("tree") / "fanuc_tree.json"
+    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
+    return path
+
+
 @eqx.filter_jit
 def _tree_eval(tree, q, f, m):
     dp, ok = jaxcal.tree_deflection(tree, q, f, m, at="tool")
@@ -259,21 +267,21 @@ def test_absolute_measurements_under_loads(fanuc, tmp_path, capsys):
         assert abs(p["value"] - k * t.factor) <= 4 * p["std"], (p, k * t.factor)
 
 
-def test_deflection_data_calibrate_the_tree_as_the_template_model(fanuc, tmp_path, capsys):
+def test_deflection_data_calibrate_the_tree_as_the_template_model(
+    fanuc, tree_file, tmp_path, capsys
+):
     """The FANUC's deflection data (the example plan: loaded minus unloaded tool
     positions) read for the robot as a tree and calibrated through the tree's equilibrium
     (`jaxcal identify --robot TREE.json`) give the template model's nonlinear fit, the
     compensator held in both: the six compliances to 0.03 std (where either fit may stop:
     `LM_CHI2_TOL`) and their stds to 1e-4 relative (the accuracy of the tree's Jacobian,
     `JACOBIAN_RTOL`)."""
-    robot, tree = fanuc
-    path = tmp_path / "fanuc_tree.json"
-    path.write_text(json.dumps(jaxcal.tree_to_dict(tree)))
+    robot = fanuc[0]
     data = jaxcal.read_dataset(DATA / "example_calibration.csv", robot)
     with warnings.catch_warnings():  # what it says of the example data is not tested here
         warnings.simplefilter("ignore")
         ref = jaxcal.identify(robot, data, fix=("Kc", "s0"))
-    args = ["identify", str(DATA / "example_calibration.csv"), "--robot", str(path), "--json"]
+    args = ["identify", str(DATA / "example_calibration.csv"), "--robot", str(tree_file), "--json"]
     assert main([*args, "--params", "joint-compliance"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["converged"] and out["held"] == [] and out["not_determined"] == {}
@@ -286,7 +294,7 @@ def test_deflection_data_calibrate_the_tree_as_the_template_model(fanuc, tmp_pat
     # The tree's deflections written as the data format (`jaxcal simulate`, noise-free):
     # the template's to the file's 1e-6 mm, beyond the models' 2 nm agreement.
     sims = {}
-    for name, extra in (("tree", ["--robot", str(path)]), ("template", [])):
+    for name, extra in (("tree", ["--robot", str(tree_file)]), ("template", [])):
         sims[name] = tmp_path / f"{name}.csv"
         cmd = ["simulate", str(DATA / "example_calibration.csv"), "-o", str(sims[name])]
         assert main([*cmd, *extra]) == 0
@@ -300,13 +308,11 @@ def test_deflection_data_calibrate_the_tree_as_the_template_model(fanuc, tmp_pat
     assert abs(out["chi2"] - float(ref.chi2_red) * ref.dof) <= 6 * 0.03**2
 
 
-def test_validate_on_deflection_data_stages_the_springs(fanuc, tmp_path, capsys):
+def test_validate_on_deflection_data_stages_the_springs(tree_file, capsys):
     """`jaxcal validate` on deflection data adds the spring groups in turn (deflections
     do not determine the geometry) and fits the FANUC's six joint springs, nothing
     else: its held-out error is of the order of its training error."""
-    path = tmp_path / "fanuc_tree.json"
-    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
-    args = ["validate", str(DATA / "example_calibration.csv"), "--robot", str(path)]
+    args = ["validate", str(DATA / "example_calibration.csv"), "--robot", str(tree_file)]
     assert main([*args, "--test", "16", "--seed", "0", "--json"]) == 0
     stages = json.loads(capsys.readouterr().out)["stages"]
     assert [s["added"] for s in stages] == list(jaxcal.DEFLECTION_GROUPS)
@@ -315,16 +321,14 @@ def test_validate_on_deflection_data_stages_the_springs(fanuc, tmp_path, capsys)
     assert first["mean_mm"] <= 2 * first["train_rms_mm"], first
 
 
-def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tmp_path, capsys):
+def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tree_file, tmp_path, capsys):
     """`jaxcal design --pool --select` on deflection data for the FANUC as a tree: the
     chosen rows determine the six joint springs (the deflection groups, as identify
     fits them) better than the median random subset of as many, and are written as the
     pool's own rows, deflections included."""
-    path = tmp_path / "fanuc_tree.json"
-    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
     pool = DATA / "example_calibration.csv"
     out = tmp_path / "chosen.csv"
-    args = ["design", "--robot", str(path), "--pool", str(pool), "--select", "12"]
+    args = ["design", "--robot", str(tree_file), "--pool", str(pool), "--select", "12"]
     assert main([*args, "--json", "-o", str(out)]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["parameters"] == [f"J{i}.k_theta" for i in range(1, 7)]
@@ -339,15 +343,13 @@ def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tmp_path, caps
     np.testing.assert_allclose(chosen.force, whole.force[rows], atol=1e-6)
 
 
-def test_discover_on_deflection_data_of_the_tree(fanuc, tmp_path, capsys):
+def test_discover_on_deflection_data_of_the_tree(tree_file, capsys):
     """`jaxcal discover` on the example's deflections with the FANUC as a tree: its data
     come from the model itself (the compensator included) with noise, so no candidate
     is decisive (ΔBIC ≥ 10 on noise alone has probability ~1e-5 per family), as the
     FANUC-form model's discover answers on the same file. Deflections do not determine
     the geometry: the nominal model is the spring groups, as for identify."""
-    path = tmp_path / "fanuc_tree.json"
-    path.write_text(json.dumps(jaxcal.tree_to_dict(fanuc[1])))
-    args = ["discover", str(DATA / "example_calibration.csv"), "--robot", str(path), "--json"]
+    args = ["discover", str(DATA / "example_calibration.csv"), "--robot", str(tree_file), "--json"]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     # Fitted from deflections the nominal model is the spring groups, as identify's.
