@@ -130,12 +130,22 @@ def exported(fn: Callable, tag: str = "") -> Callable:
         # Committed and uncommitted arguments lower to different calls (a second compile
         # of the whole program): commit them all, to the default device or, where the
         # program divides its work among several, to all of them (replicated).
-        outs = iter(run(*jax.device_put(arrays, placement)))
+        # The results leave uncommitted, as a traced call's would: a committed result
+        # would commit every array computed from it, and each program it then reaches
+        # would lower to the committed variant, compiled beside the uncommitted one that
+        # the same program gets elsewhere (the two differ in their sharding annotations).
+        outs = iter(_uncommitted(run(*jax.device_put(arrays, placement))))
         return jax.tree.unflatten(
             out_def, [next(outs) if isinstance(x, str) and x == _ARRAY else x for x in flat]
         )
 
     return call
+
+
+def _uncommitted(arrays: list) -> list:
+    """`arrays` as uncommitted arrays on the default device (a copy through the host:
+    JAX has no public way to drop an array's commitment in place)."""
+    return [jax.numpy.asarray(np.asarray(a)) for a in arrays]
 
 
 @functools.cache

@@ -65,6 +65,16 @@ def test_stored_program_matches_and_skips_tracing(store):
     assert len(list(store.glob("*-cache"))) == 3
 
 
+def test_results_are_uncommitted_as_a_traced_call_s(store):
+    # A committed result would make every program it reaches lower to its committed
+    # variant: a second compile of a program that other callers get uncommitted.
+    z, w = jnp.arange(4.0), jnp.asarray(0.5)
+    for _ in range(2):  # exported, then read back
+        got = f(z, w, 3)
+        assert not got.value.committed and not got.total.committed
+        _forget(store)
+
+
 def test_corrupt_entry_is_exported_again(store):
     z, w = jnp.arange(3.0), jnp.asarray(2.0)
     f(z, w, 1)
