@@ -144,8 +144,14 @@ def exported(fn: Callable, tag: str = "") -> Callable:
 
 def _uncommitted(arrays: list) -> list:
     """`arrays` as uncommitted arrays on the default device (a copy through the host:
-    JAX has no public way to drop an array's commitment in place)."""
-    return [jax.numpy.asarray(np.asarray(a)) for a in arrays]
+    JAX has no public way to drop an array's commitment in place); arrays of an extended
+    dtype (PRNG keys), which have no host form, as they are."""
+    return [
+        a
+        if jax.dtypes.issubdtype(a.dtype, jax.dtypes.extended)
+        else jax.numpy.asarray(np.asarray(a))
+        for a in arrays
+    ]
 
 
 @functools.cache

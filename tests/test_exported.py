@@ -75,6 +75,22 @@ def test_results_are_uncommitted_as_a_traced_call_s(store):
         _forget(store)
 
 
+@eqx.filter_jit
+def _draw(key, x):
+    k1, k2 = jax.random.split(key)
+    return k1, x + jax.random.normal(k2, x.shape)
+
+
+def test_a_key_among_the_results_comes_back_as_a_key(store):
+    # A PRNG key has no host form: it is returned as the stored program gives it.
+    key, x = jax.random.key(0), jnp.zeros(3)
+    want_key, want = _draw(key, x)
+    got_key, got = exported(_draw)(key, x)
+    assert not got.committed
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    np.testing.assert_array_equal(jax.random.key_data(got_key), jax.random.key_data(want_key))
+
+
 def test_corrupt_entry_is_exported_again(store):
     z, w = jnp.arange(3.0), jnp.asarray(2.0)
     f(z, w, 1)
