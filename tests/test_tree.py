@@ -624,9 +624,7 @@ y, ok = jaxcal.predicted_markers(robot, data)
 J = scaled_jacobian(robot, table, data)
 fanuc = jaxcal.load_tree("fanuc_m900ib700")  # few springs: the formed implicit solve
 loaded = jaxcal.read_markers(sys.argv[3], fanuc).subset(np.arange(7))
-plan = jaxcal.MarkerData(
-    loaded.q, None, np.ones((7, 1), bool), loaded.sigma, loaded.force, loaded.moment
-)
+plan = jaxcal.MarkerData(loaded.q, None, loaded.seen, loaded.sigma, loaded.force, loaded.moment)
 ftable = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
 Jf = scaled_jacobian(fanuc, ftable, plan)
 np.savez(sys.argv[2], y=y, ok=ok, J=J, Jf=Jf, devices=jax.device_count())
@@ -668,7 +666,7 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     # deflections: one equilibrium per pose instead of two, a smaller program.)
     fanuc = jaxcal.load_tree("fanuc_m900ib700")
     sub = jaxcal.read_markers(EXAMPLE, fanuc).subset(np.arange(7))
-    plan = jaxcal.MarkerData(sub.q, None, np.ones((7, 1), bool), sub.sigma, sub.force, sub.moment)
+    plan = jaxcal.MarkerData(sub.q, None, sub.seen, sub.sigma, sub.force, sub.moment)
     table = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
     J = scaled_jacobian(fanuc, table, plan)
     np.testing.assert_allclose(two["Jf"], J, rtol=0, atol=1e-9 * np.abs(J).max())
