@@ -48,7 +48,7 @@ _SLOWEST_FILES = {
     "test_quasi_serial.py": 200,
     "test_discrepancy.py": 180,
     "test_discover_tree.py": 140,
-    "test_tree.py": 114,
+    "test_tree.py": 170,
     "test_compensation.py": 93,
     "test_design.py": 83,
     "test_faults.py": 67,
