@@ -31,7 +31,7 @@ DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "dlr_agile_justi
 #: mm/deg, offsets deg, DH mm/deg, springs µrad/(N·m)). The file's springs are rigid
 #: (compliance 0), so their prior's std is the size a spring of such an arm may have.
 #: With a std of 5, the 300 training rows put torso_4's joint spring at 169 µrad/(N·m),
-#: 34 std from the prior's centre (19 springs beyond 3 std): the criterion took the
+#: 34 std from the prior's centre (28 springs beyond 3 std): the criterion took the
 #: springs as known to ±5, and every fit of a few rows pulled them towards zero.
 PRIORS = {
     "frames": 100.0,
