@@ -67,7 +67,9 @@ def pytest_runtest_protocol(item, nextitem):
 
 def pytest_sessionfinish(session):
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
-    out = os.path.join(os.environ.get("SUITE_TIMES_DIR", "."), f"suite-times-{worker}.json")
+    folder = os.environ.get("SUITE_TIMES_DIR", ".")
+    os.makedirs(folder, exist_ok=True)
+    out = os.path.join(folder, f"suite-times-{worker}.json")
     with open(out, "w") as f:
         json.dump({k: dict(v) for k, v in _times.items()}, f)
     with open(out.replace("suite-times-", "suite-programs-"), "w") as f:

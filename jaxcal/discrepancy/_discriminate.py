@@ -18,6 +18,7 @@ units of χ²: the expected ΔBIC between the two after measuring the rows is ab
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import equinox as eqx
@@ -73,28 +74,31 @@ def default_pool(sm: SuperModel, data: Dataset, n: int = 400, seed: int = 0) -> 
     )
 
 
+#: One program per `SuperModel.key`, shared by every discrimination with that model (its
+#: robot's values and the pool are arguments; shapes are keyed by jit itself).
+_PROGRAMS: dict = {}
+
+
 def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray):
     """Predictions (B, m, 3) m of `pool` at each parameter vector and their Jacobian
     (B, m, 3, P) in every parameter, by forward mode through the equilibria."""
     q_unique, inv = configurations(pool.q)
     design = (*with_unloaded(pool.q, pool.force, pool.moment, jnp.asarray(q_unique)), inv)
-
-    @eqx.filter_jit
-    def run(p, design):
-        def model(p):
-            q_all, f_all, m_all, inverse = design
-            robot = sm.to_robot(p)
-            dp, ok = measured_deflections(robot, q_all, f_all, m_all, jnp.asarray(inverse))
-            return dp, (dp, ok)
-
-        def one(p):
-            J, (dp, ok) = jax.jacfwd(model, has_aux=True)(p)
-            return dp, ok, J
-
-        return jax.vmap(one)(p)
-
-    y, ok, J = run(jnp.asarray(params), design)
+    if sm.key not in _PROGRAMS:
+        one = functools.partial(_predictions_and_jacobian, sm.to_robot)
+        _PROGRAMS[sm.key] = eqx.filter_jit(jax.vmap(one, in_axes=(None, None, 0)))
+    y, ok, J = _PROGRAMS[sm.key](sm.robot, design, jnp.asarray(params))
     return np.asarray(y), np.asarray(ok), np.asarray(J)
+
+
+def _predictions_and_jacobian(to_robot, robot, design, p):
+    def model(p):
+        q_all, f_all, m_all, inverse = design
+        dp, ok = measured_deflections(to_robot(p, robot), q_all, f_all, m_all, jnp.asarray(inverse))
+        return dp, (dp, ok)
+
+    J, (dp, ok) = jax.jacfwd(model, has_aux=True)(p)
+    return dp, ok, J
 
 
 def discriminating_rows(

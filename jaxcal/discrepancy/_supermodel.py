@@ -139,6 +139,12 @@ class SuperModel:
             self.use_moment,
         )
 
+    @property
+    def key(self) -> tuple:
+        """What programs compiled for this model are shared by: its robot's structure,
+        candidate list and moment use (not the robot's values, nor the design)."""
+        return self._key
+
     def with_design(self, data: Dataset) -> SuperModel:
         """The same model over the configurations and loads of `data`, which must have
         as many rows (and as many distinct configurations, to share the compiled
