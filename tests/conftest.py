@@ -61,6 +61,7 @@ _SLOWEST_FILES = {
     "test_equilibrium.py": 23,
     "test_linalg_switch.py": 23,
     "test_distributed.py": 22,
+    "test_compensation_tree.py": 27,
     "test_cli_urdf.py": 19,
     "test_urdf.py": 19,
     "test_no_lapack.py": 18,

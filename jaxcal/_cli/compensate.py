@@ -37,7 +37,12 @@ def register(sub) -> None:
             "(identify --save-robot) res_std_mm, the residual's predicted standard "
             "deviation from the calibration's covariance. Rows that cannot be compensated "
             "(equilibrium failure, target out of reach, joint limits, near-singular) are "
-            "named with the reason and not written; the exit status is then 1."
+            "named with the reason and not written; the exit status is then 1. A robot "
+            "given as a kinematic tree (a tree robot file, a URDF, or a robot file "
+            "identify --save-robot wrote for one) takes its joints' columns q1_deg..qN_deg "
+            "(q_mm for a prismatic joint), its tool is its first marker (where the loads "
+            "act), with more than six joints the correction is the least-norm one, and "
+            "res_std_mm is not given (its calibration's covariance is not propagated)."
         ),
     )
     p.add_argument("path", metavar="PATH.csv", help="programmed angles and process wrench")
@@ -61,7 +66,9 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._identification.calibration import load_calibrated
+    from .._model.robot_files import is_tree_file
     from ..compensation import compensate, read_path, write_commands
+    from .tree import tree_robot
 
     inputs = {"the path file": args.path, "the robot file": args.robot}
     # The commands: the path's rows with about twice their columns.
@@ -71,7 +78,10 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.plot, "--plot", inputs=plot_inputs, size=_PLOT_BYTES)
     if not args.max_cond > 1:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
-    robot, calibration = load_calibrated(args.robot)
+    if is_tree_file(args.robot):
+        robot, calibration = tree_robot(args), None
+    else:
+        robot, calibration = load_calibrated(args.robot)
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)
     comp = compensate(robot, path, calibration, max_cond=args.max_cond)
@@ -110,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace, comp, calibration, written: int, output) -> int:
+    from .._model.robot_files import is_tree_file
+
     # `output`: the commands file, None when the commands went to standard output.
     s = comp.summary()
     refused = s["refused"]
@@ -128,6 +140,9 @@ def _report(args: argparse.Namespace, comp, calibration, written: int, output) -
         ]
         if s["max_res_std_mm"] is not None:
             rows.append(["max predicted residual std", f"{s['max_res_std_mm']:.4f} mm"])
+        elif is_tree_file(args.robot):
+            why = "not propagated for a robot given as a kinematic tree"
+            rows.append(["predicted residual std", f"n/a ({why})"])
         else:
             rows.append(["predicted residual std", "n/a (robot file has no calibration)"])
         print(format_table(["compensation", ""], rows))

@@ -15,3 +15,4 @@ from ._solve import (
     landing_error as landing_error,
     pose_error as pose_error,
 )
+from ._tree import compensate_tree_row as compensate_tree_row

@@ -21,11 +21,14 @@ from jaxtyping import Array, Float
 
 from .._batching import chunk_width, map_in_chunks
 from .._identification.calibration import Calibration
-from .._io import Dataset, atomic_file, input_cells, read_dataset
+from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_file, input_cells, read_dataset
+from .._markers import MarkerData, joint_units, marker_columns, read_markers
+from .._model.tree import TreeRobot
 from .._precision import require_float64
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
+from ._tree import tool_marker, tree_rows
 
 __all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
 
@@ -54,14 +57,17 @@ COMMAND_COLUMNS = (
 
 
 class Compensation(eqx.Module):
-    """A compensated path: the programmed path, its per-row `RowCompensation` (leading
-    axis: the rows) and the settings. `ok` marks the rows that can be sent to the
-    controller; `refused()` names the others."""
+    """A compensated path: the programmed path (a `Dataset`, or `MarkerData` for a robot
+    given as a kinematic tree), its per-row `RowCompensation` (leading axis: the rows)
+    and the settings. `ok` marks the rows that can be sent to the controller;
+    `refused()` names the others. `limits_deg`: the joint limits in the units of the
+    path file's joint columns `joint_columns` (deg, or mm for a prismatic joint)."""
 
-    path: Dataset
+    path: Dataset | MarkerData
     rows: RowCompensation
     max_cond: float = eqx.field(static=True)
     limits_deg: tuple[tuple[float, float], ...] = eqx.field(static=True, default=())
+    joint_columns: tuple[str, ...] = eqx.field(static=True, default=Q_COLS)
 
     @property
     def ok(self) -> np.ndarray:
@@ -82,13 +88,19 @@ class Compensation(eqx.Module):
         return out
 
     def _limit_detail(self, i: int) -> str:
-        qc = np.rad2deg(np.asarray(self.rows.qc[i]))
+        qc = np.asarray(self.rows.qc[i]) * self._units()
         out = [
-            f"qc{j + 1} = {v:.4f} deg outside [{lo:g}, {hi:g}]"
-            for j, (v, (lo, hi)) in enumerate(zip(qc, self.limits_deg, strict=True))
+            f"qc{j + 1} = {v:.4f} {col.rsplit('_', 1)[1]} outside [{lo:g}, {hi:g}]"
+            for j, (v, (lo, hi), col) in enumerate(
+                zip(qc, self.limits_deg, self.joint_columns, strict=True)
+            )
             if not lo - 1e-9 <= v <= hi + 1e-9
         ]
         return "; ".join(out)
+
+    def _units(self) -> np.ndarray:
+        # File units per SI unit of each joint column: deg per rad, mm per m.
+        return np.array([1e3 if c.endswith("_mm") else np.degrees(1.0) for c in self.joint_columns])
 
     def summary(self) -> dict:
         """Figures of the path (mm, µm, µrad), over the compensated rows."""
@@ -110,10 +122,14 @@ class Compensation(eqx.Module):
         }
 
 
-def read_path(path: str | Path, robot: Robot) -> Dataset:
+def read_path(path: str | Path, robot: Robot | TreeRobot) -> Dataset | MarkerData:
     """Read a path CSV (programmed angles and process wrench; deflection columns, if
-    any, are ignored). Bad cells, missing columns and angles beyond the joint limits are
-    named by file, row and column (`DataError`)."""
+    any, are ignored; for a tree robot its joints' columns, the wrench at its first
+    marker, and marker columns, if any, ignored). Bad cells, missing columns and angles
+    beyond the joint limits are named by file, row and column (`DataError`)."""
+    if isinstance(robot, TreeRobot):
+        data = read_markers(path, robot, require_markers=False)
+        return eqx.tree_at(lambda d: d.markers, data, None, is_leaf=lambda x: x is None)
     return read_dataset(path, robot, require_deflection=False, ignore_deflection=True)
 
 
@@ -128,8 +144,8 @@ def compensate_rows(robot, q, force, moment, covariance, max_cond, length_scale,
 
 
 def compensate(
-    robot: Robot,
-    path: Dataset,
+    robot: Robot | TreeRobot,
+    path: Dataset | MarkerData,
     calibration: Calibration | Float[Array, "P P"] | None = None,
     *,
     max_cond: float = 500.0,
@@ -140,10 +156,12 @@ def compensate(
 
     **Arguments**
 
-    - `robot`: the (calibrated) robot model.
+    - `robot`: the (calibrated) robot model: the FANUC-form `Robot`, or a `TreeRobot`
+      whose tool is its first marker (`compensate_tree_row`).
     - `path`: programmed angles and process wrench per row (`read_path`).
     - `calibration`: a `Calibration` (from `jaxcal.read_calibration`) or a covariance of
-      all physical parameters (user units): gives each row's `res_std`.
+      all physical parameters (user units): gives each row's `res_std` (FANUC-form
+      robots only).
     - `max_cond`, `length_scale`, `tol`: see `compensate_row`.
 
     Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
@@ -155,11 +173,17 @@ def compensate(
     if not (tol > 0) or not (length_scale > 0):
         raise ValueError("tol and length_scale must be positive")
     for name in ("q", "force", "moment"):
+        if getattr(path, name) is None:  # a tree robot's path without that load
+            continue
         a = np.asarray(getattr(path, name))
         bad = ~np.all(np.isfinite(a), axis=1)
         if bad.any():
             rows = ", ".join(str(i + 1) for i in np.flatnonzero(bad)[:20])
             raise ValueError(f"path: non-finite {name} in row(s) {rows}")
+    if isinstance(robot, TreeRobot):
+        return _compensate_tree(robot, path, calibration, max_cond, length_scale, tol)
+    if not isinstance(path, Dataset):
+        raise ValueError("path: the FANUC-form robot's path is read by read_path(file, robot)")
     cov = None
     if isinstance(calibration, Calibration):
         cov = calibration.full_covariance(robot)
@@ -182,6 +206,55 @@ def compensate(
     return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)
 
 
+def _compensate_tree(robot, path, calibration, max_cond, length_scale, tol) -> Compensation:
+    if not isinstance(path, MarkerData):
+        raise ValueError("path: a tree robot's path is read by read_path(file, robot)")
+    if calibration is not None:
+        raise ValueError(
+            "calibration: a tree robot's compensation does not propagate a covariance "
+            "(res_std); pass None"
+        )
+    at = tool_marker(robot)
+    q = jnp.asarray(path.q)
+    force = jnp.zeros_like(q[:, :3]) if path.force is None else jnp.asarray(path.force)
+    moment = None if path.moment is None else jnp.asarray(path.moment)
+    settings = (float(max_cond), float(length_scale), float(tol))
+    rows = map_in_chunks(
+        lambda q, f, m: tree_rows(robot, q, f, m, at, *settings),
+        len(path),
+        chunk_rows(),
+        q,
+        force,
+        moment,
+    )
+    unit = joint_units(robot)
+    lim = np.asarray(robot.joint_limits) * unit[:, None]
+    return Compensation(
+        path=path,
+        rows=rows,
+        max_cond=float(max_cond),
+        limits_deg=tuple((float(lo), float(hi)) for lo, hi in lim),
+        joint_columns=marker_columns(robot)[0],
+    )
+
+
+def _path_cells(comp: Compensation) -> tuple[list[str], list[list[str]]]:
+    # The path's own columns, as `input_cells` writes a data set's.
+    p = comp.path
+    if isinstance(p, Dataset):
+        return input_cells(p)
+    q = np.asarray(p.q) * comp._units()
+    loads = [
+        (c, np.asarray(x)) for c, x in ((F_COLS, p.force), (M_COLS, p.moment)) if x is not None
+    ]
+    header = [*comp.joint_columns, *(c for cols, _ in loads for c in cols)]
+    rows = [
+        [f"{x:.6f}" for x in q[i]] + [f"{v:.3f}" for _, x in loads for v in x[i]]
+        for i in range(len(p))
+    ]
+    return header, rows
+
+
 def write_commands(out: str | Path | TextIO, comp: Compensation) -> int:
     """Write the compensated rows (input columns, `COMMAND_COLUMNS`, `res_std_mm` with a
     calibration, `id` where the path has labels) to a path `out`, atomically (a temporary
@@ -190,14 +263,14 @@ def write_commands(out: str | Path | TextIO, comp: Compensation) -> int:
     p = comp.path
     ok = comp.ok
     has_std = bool(np.all(np.isfinite(np.asarray(comp.rows.res_std)[ok]))) and ok.any()
-    header, cells = input_cells(p)
-    header += list(COMMAND_COLUMNS)
+    header, cells = _path_cells(comp)
+    header += ["qc" + c[1:] for c in comp.joint_columns] + list(COMMAND_COLUMNS[6:])
     if has_std:
         header.append("res_std_mm")
     if p.ids:
         header.append("id")
     r = comp.rows
-    qc = np.rad2deg(np.asarray(r.qc))
+    qc = np.asarray(r.qc) * comp._units()
     d = np.asarray(r.deflection) * 1e3
     res = np.linalg.norm(np.asarray(r.residual), axis=1) * 1e3
     rot = np.linalg.norm(np.asarray(r.residual_rotation), axis=1) * 1e6

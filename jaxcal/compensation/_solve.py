@@ -36,7 +36,14 @@ from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
 from .._solution import RESULTS
 
-__all__ = ["RowCompensation", "compensate_row", "pose_error", "landing_error"]
+__all__ = [
+    "RowCompensation",
+    "compensate_row",
+    "corrected_commands",
+    "condition_number",
+    "pose_error",
+    "landing_error",
+]
 
 #: Step budget of the fixed-point iteration (it converges in 4–6 steps).
 _MAX_STEPS = 16
@@ -121,12 +128,65 @@ def _one_root(robot, q, force, moment, x0=None):
     return x[0], ok[0]
 
 
-def _loaded_pose(robot, qc, force, moment, x0):
+def _loaded_pose(robot, force, moment, x0, qc):
     """Tool pose at `qc` under the wrench, differentiable in `qc` and the robot."""
     xr, conv = _one_root(robot, qc, force, moment, x0)
     x, ok = implicit_step(robot, qc, force, moment, xr, conv, symmetric=moment is None)
     p, R = tool_pose(robot, qc, x)
     return p, R, ok
+
+
+def corrected_commands(rigid_pose, loaded_pose, args, q, target, first, length_scale):
+    """The commands `qc` that put the loaded tool on `target` `(p, R)`: the fixed point
+    `qc ← qc − J⁺ e(qc)`, `e` the pose error (positions over `length_scale`, m per rad)
+    of `loaded_pose(qc, args)` and `J` the rigid-body Jacobian of `rigid_pose(q)` (the
+    deflections frozen at the programmed angles `q`); `J⁺` its inverse for as many
+    joints as pose equations, the least-norm step `Jᵀ (J Jᵀ)⁻¹` for more. It starts at
+    `q − J⁺ first`, `first` the `(deflection, rotation)` the load causes at `q`.
+
+    The rigid-body Jacobian differs from the loaded robot's by the change of deflection
+    with q, a relative 1e-3: the map contracts by that factor per step (mm → µm → nm →
+    pm), with one equilibrium and no derivative through it per step. The derivative of
+    `qc` (optimistix's implicit function theorem on the fixed point, through `args`
+    and `target`) is exact. Returns `(qc, solved, J)`."""
+    dtype = q.dtype
+    scale = jnp.asarray(length_scale, dtype)
+
+    def error(p, R, target):
+        e_p, e_r = pose_error(target[0], target[1], p, R)
+        return jnp.concatenate([e_p / scale, e_r])
+
+    frozen = jax.lax.stop_gradient(target)
+
+    def rigid_error(y):
+        p, R = rigid_pose(y)
+        return error(p, R, frozen)
+
+    J = jax.lax.stop_gradient(jax.jacfwd(rigid_error)(q))
+    if J.shape[0] == J.shape[1]:
+        lu = lu_factor(J)
+        solve = lambda e: lu_solve(*lu, e)
+    else:
+        lu = lu_factor(J @ J.T)
+        solve = lambda e: J.T @ lu_solve(*lu, e)
+
+    def step(qc, a):
+        model_args, tgt = a
+        p, R = loaded_pose(qc, model_args)
+        return qc - solve(error(p, R, tgt))
+
+    solver = optx.FixedPointIteration(rtol=1e-12, atol=1e-14)
+    q0 = q - solve(jax.lax.stop_gradient(jnp.concatenate([first[0] / scale, first[1]])))
+    sol = optx.fixed_point(step, solver, q0, (args, target), max_steps=_MAX_STEPS, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful, J
+
+
+def condition_number(J: Float[Array, "6 n"]) -> Float[Array, ""]:
+    """Condition number of the rigid-body Jacobian (its nonzero singular values): near a
+    singularity of the arm it is what degenerates; `inf` if not finite."""
+    ev = eigvalsh(J.T @ J if J.shape[0] == J.shape[1] else J @ J.T)
+    cond = jnp.sqrt(jnp.max(ev) / jnp.maximum(jnp.min(ev), jnp.finfo(J.dtype).tiny))
+    return jnp.where(jnp.all(jnp.isfinite(J)), cond, jnp.inf)
 
 
 def compensate_row(
@@ -171,36 +231,18 @@ def compensate_row(
     p_t, R_t = tool_pose(robot, q, x_u)
     p_l, R_l = tool_pose(robot, q, x_l)
     deflection, rotation = pose_error(p_t, R_t, p_l, R_l)
-    scale = jnp.asarray(length_scale, dtype)
-
-    def error(p, R, target):
-        e_p, e_r = pose_error(target[0], target[1], p, R)
-        return jnp.concatenate([e_p / scale, e_r])
-
-    # The rigid-body Jacobian at the programmed angles (deflections frozen) differs
-    # from the loaded robot's by the change of deflection with q, a relative 1e-3: as
-    # the fixed-point map qc ← qc − J⁻¹ e(qc) it contracts by that factor per step
-    # (mm → µm → nm → pm), with one equilibrium and no derivative through it per step.
-    # The derivative of qc (implicit function theorem on the fixed point) is exact.
+    # The first-order correction of the deflection already computed at the programmed
+    # angles starts the iteration: its first step, without its equilibrium solve.
     xl_frozen = jax.lax.stop_gradient(x_l)
-    target = jax.lax.stop_gradient((p_t, R_t))
-    J = jax.jacfwd(lambda y: error(*tool_pose(robot, y, xl_frozen), target))(q)
-    J = jax.lax.stop_gradient(J)
-    lu = lu_factor(J)
-
-    def step(qc, args):
-        rb, f, m, tgt, x0 = args
-        p, R, _ = _loaded_pose(rb, qc, f, m, x0)
-        return qc - lu_solve(*lu, error(p, R, tgt))
-
-    solver = optx.FixedPointIteration(rtol=1e-12, atol=1e-14)
-    args = (robot, force, moment, (p_t, R_t), xl_frozen)
-    # Start from the first-order correction of the deflection already computed at the
-    # programmed angles: the first step of the iteration, without its equilibrium solve.
-    q0 = q - lu_solve(*lu, jax.lax.stop_gradient(jnp.concatenate([deflection / scale, rotation])))
-    sol = optx.fixed_point(step, solver, q0, args, max_steps=_MAX_STEPS, throw=False)
-    qc = sol.value
-    solved = sol.result == optx.RESULTS.successful
+    qc, solved, J = corrected_commands(
+        lambda y: tool_pose(robot, y, xl_frozen),
+        lambda qc, a: _loaded_pose(a[0], a[1], a[2], a[3], qc)[:2],
+        (robot, force, moment, xl_frozen),
+        q,
+        (p_t, R_t),
+        (deflection, rotation),
+        length_scale,
+    )
 
     # Verify with an independent solve from zero deflection, with the stability check.
     eq = solve_equilibrium(stop_gradients(robot), jax.lax.stop_gradient(qc), force, moment)
@@ -214,10 +256,7 @@ def compensate_row(
         & (jnp.linalg.norm(res_r) <= tol)
         & jnp.all(jnp.isfinite(qc))
     )
-    # Near a singularity of the arm the rigid Jacobian is what degenerates.
-    ev = eigvalsh(J.T @ J)
-    cond = jnp.sqrt(jnp.max(ev) / jnp.maximum(jnp.min(ev), jnp.finfo(dtype).tiny))
-    cond = jnp.where(jnp.all(jnp.isfinite(J)), cond, jnp.inf)
+    cond = condition_number(J)
     lim = robot.joint_limits.astype(dtype)
     within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
 

@@ -1,0 +1,136 @@
+"""Compliance error compensation of a robot given as a kinematic tree (`TreeRobot`):
+the problem and the iteration of `_solve.py` (`corrected_commands`) for the pose of one
+of its markers, the tool, where the process wrench acts.
+
+The target of a row is the tool's pose (its marker's position and its element's
+orientation) at the programmed joint values under gravity alone; the compensated values
+`qc` put it there under gravity and the wrench. Each equilibrium is the tree's own
+(`tree_equilibrium`), solved afresh at every step of the iteration (a few fixed-point
+steps from the rigid robot's deflections). A robot with more active joints than the
+pose's six equations gets the least-norm correction: joints that do not move the tool
+(Agile Justin's other arm) keep their programmed values.
+
+A tree robot's compensation does not propagate a parameter covariance: `res_cov` and
+`res_std` are NaN (its saved robot file holds each parameter's std, not their
+covariance, and the residual's spread depends on the correlations).
+
+Functions here handle one row; `compensate` vmaps them over a path.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .._model.tree import TreeRobot
+from .._model.tree_kinematics import marker_index, marker_pose
+from .._model.tree_statics import tree_equilibrium
+from .._solution import RESULTS
+from ._solve import RowCompensation, condition_number, corrected_commands, pose_error
+
+__all__ = ["compensate_tree_row", "tool_marker", "tree_rows"]
+
+#: Pose equations of a tool (position and orientation): the fewest active joints a
+#: robot needs to be compensated.
+_POSE = 6
+
+
+def tool_marker(robot: TreeRobot, at: int | str = 0) -> int:
+    """The index of the tool marker `at` of a robot that can be compensated, or
+    `ValueError` naming what is missing."""
+    if robot.n_joints < _POSE:
+        raise ValueError(
+            f"robot {robot.name!r}: compensating a tool pose (6 equations) needs at least 6 "
+            f"active joints; it has {robot.n_joints}"
+        )
+    return marker_index(robot, at)
+
+
+def compensate_tree_row(
+    robot: TreeRobot,
+    q: Float[Array, " n"],
+    force: Float[Array, 3] | None = None,
+    moment: Float[Array, 3] | None = None,
+    *,
+    at: int | str = 0,
+    max_cond: float = 500.0,
+    length_scale: float = 1.0,
+    tol: float = 1e-8,
+) -> RowCompensation:
+    """Compensated joint values for one row of a tree robot (see the module docstring).
+
+    **Arguments**
+
+    - `q`: programmed joint values (rad; m for a prismatic joint); `force` (N) and
+      `moment` (N·m): process wrench at the tool marker `at` (a name or an index;
+      default the first, where the data format's loads act), base frame.
+    - `max_cond`, `length_scale`, `tol`: as `compensate_row`'s (the condition number is
+      of the rigid-body Jacobian's nonzero singular values).
+
+    Raises `ValueError` at trace time for a robot with fewer than six active joints or
+    an unknown marker; never raises on values: check `result` (for use under `jax.vmap`).
+    """
+    i = tool_marker(robot, at)
+    dtype = jnp.result_type(q, robot.compliance)
+    q = jnp.asarray(q, dtype)
+    force = jnp.zeros(3, dtype) if force is None else jnp.asarray(force, dtype)
+    free = tree_equilibrium(robot, q)
+    loaded = tree_equilibrium(robot, q, force=force, moment=moment, at=i)
+    R_t, p_t = marker_pose(robot, q, free.phi, i)
+    R_l, p_l = marker_pose(robot, q, loaded.phi, i)
+    deflection, rotation = pose_error(p_t, R_t, p_l, R_l)
+    frozen = jax.lax.stop_gradient(loaded.phi)
+
+    def rigid_pose(y):
+        R, p = marker_pose(robot, y, frozen, i)
+        return p, R
+
+    def loaded_pose(qc, args):
+        rb, f, m = args
+        eq = tree_equilibrium(rb, qc, force=f, moment=m, at=i)
+        R, p = marker_pose(rb, qc, eq.phi, i)
+        return p, R
+
+    qc, solved, J = corrected_commands(
+        rigid_pose,
+        loaded_pose,
+        (robot, force, moment),
+        q,
+        (p_t, R_t),
+        (deflection, rotation),
+        length_scale,
+    )
+    # Verify with an independent solve at the result.
+    eq = tree_equilibrium(robot, jax.lax.stop_gradient(qc), force=force, moment=moment, at=i)
+    R_c, p_c = marker_pose(robot, qc, eq.phi, i)
+    res_p, res_r = jax.lax.stop_gradient(pose_error(p_t, R_t, p_c, R_c))
+    verified = (
+        eq.converged
+        & (jnp.linalg.norm(res_p) <= tol)
+        & (jnp.linalg.norm(res_r) <= tol)
+        & jnp.all(jnp.isfinite(qc))
+    )
+    cond = condition_number(J)
+    lim = robot.joint_limits.astype(dtype)
+    within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
+    res_cov = jnp.full((3, 3), jnp.nan, dtype)
+    res_std = jnp.full((), jnp.nan, dtype)
+    # One reason per row, the most basic cause last (it wins), as `compensate_row`.
+    result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
+    result = RESULTS.where(solved & verified, result, RESULTS.out_of_reach)
+    result = RESULTS.where(cond > max_cond, RESULTS.singular, result)
+    result = RESULTS.where(free.converged & loaded.converged, result, RESULTS.equilibrium_failed)
+    return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
+
+
+@eqx.filter_jit
+def tree_rows(robot, q, force, moment, at, max_cond, length_scale, tol):
+    """`compensate_tree_row` vmapped over rows (`moment` `None`: no moments)."""
+    one = lambda a, b, c: compensate_tree_row(
+        robot, a, b, c, at=at, max_cond=max_cond, length_scale=length_scale, tol=tol
+    )
+    if moment is None:
+        return jax.vmap(lambda a, b: one(a, b, None))(q, force)
+    return jax.vmap(one)(q, force, moment)

@@ -1,0 +1,106 @@
+"""Compliance error compensation of robots given as kinematic trees: the FANUC as a tree
+gives the template model's commands (command line, same path file), a redundant robot
+(Agile Justin, 19 joints) gets the least-norm correction that lands its tool marker,
+and what a tree robot cannot be compensated for is named."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcal
+from jaxcal.compensation import compensate_tree_row
+from jaxcal.internal.cli import main
+
+HEADER = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N,mx_Nm,my_Nm,mz_Nm"
+ROWS = (
+    "10,20,-30,40,50,60,0,0,-3000,0,0,0",
+    "-20,10,5,-40,-60,10,1000,500,-2000,100,-50,30",
+    "35,25,-10,-20,80,-45,-800,2800,600,-40,20,60",
+)
+
+
+def _commands(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_fanuc_as_a_tree_gives_the_template_models_commands(tmp_path, capsys):
+    """The two models of the FANUC agree to 2 nm in deflection (tests/test_quasi_serial.py),
+    which moves a command by at most ~2e-9 m over the arm's ≥ 0.5 m lever: 4e-9 rad,
+    2.3e-7 deg. The commands files are compared at 3e-7 deg, the deflections at the
+    file's 1e-6 mm; both models land their own tool within 1 nm."""
+    tree = tmp_path / "fanuc_tree.json"
+    assert main(["export", "-o", str(tree)]) == 0
+    capsys.readouterr()
+    path = tmp_path / "path.csv"
+    path.write_text("\n".join((HEADER, *ROWS)) + "\n")
+    out = {}
+    for name, extra in (("tree", ["--robot", str(tree)]), ("template", [])):
+        out[name] = tmp_path / f"{name}.csv"
+        assert main(["compensate", str(path), "-o", str(out[name]), *extra, "--json"]) == 0
+        s = json.loads(capsys.readouterr().out)
+        assert s["compensated"] == len(ROWS) and s["max_residual_um"] < 1e-3, s
+    tree_rows, template_rows = _commands(out["tree"]), _commands(out["template"])
+    for a, b in zip(tree_rows, template_rows, strict=True):
+        for i in range(1, 7):
+            assert abs(float(a[f"qc{i}_deg"]) - float(b[f"qc{i}_deg"])) <= 3e-7, (i, a, b)
+        for c in ("model_dx_mm", "model_dy_mm", "model_dz_mm"):
+            assert abs(float(a[c]) - float(b[c])) <= 2e-6, (c, a, b)
+    assert "res_std_mm" not in tree_rows[0]
+
+
+def test_redundant_robot_gets_the_least_norm_correction():
+    """Agile Justin (springs of a plausible size) with 50 N down at the right hand: the
+    corrected angles land the hand's pose on its target (the tree's own equilibrium at
+    `qc`), move only the joints that carry the right hand (torso and right arm), and
+    are the least-norm correction: orthogonal to the null space of the hand's rigid
+    Jacobian, to the iteration's round-off."""
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    rev = jnp.asarray(robot.revolute)
+    robot = eqx.tree_at(
+        lambda r: r.compliance, robot, robot.compliance.at[rev].set(jnp.array([8e-6, 3e-6, 3e-6]))
+    )
+    data = jaxcal.read_markers("tests/data/dlr_agile_justin.csv", robot)
+    q = jnp.asarray(data.q[0])
+    row = jax.jit(lambda q: compensate_tree_row(robot, q, jnp.array([0.0, 0.0, -50.0])))(q)
+    assert row.result == jaxcal.RESULTS.successful
+    assert float(jnp.linalg.norm(row.deflection)) > 1e-4  # a deflection to compensate
+    assert float(jnp.linalg.norm(row.residual)) < 1e-9
+    assert float(jnp.linalg.norm(row.residual_rotation)) < 1e-9
+    dq = np.asarray(row.qc - q)
+    others = [i for i, n in enumerate(robot.joint_names) if n.startswith(("left", "head"))]
+    assert np.all(dq[others] == 0.0)
+    assert np.abs(dq).max() > 1e-5
+    # Least norm: every step is in the row space of the rigid-body Jacobian of the
+    # hand's pose at the programmed angles (the loaded deflections frozen), so dq is.
+    # The element frame's rotation and origin span the same rows as the marker's pose.
+    load = jnp.array([0.0, 0.0, -50.0])
+    phi = jaxcal.tree_equilibrium(robot, q, force=load).phi
+    hand = robot.marker_element[0]
+    J = jax.jacfwd(lambda y: jaxcal.element_frames(robot, y, phi)[hand, :3].ravel())(q)
+    _, s, vt = np.linalg.svd(np.asarray(J))
+    assert np.sum(s > 1e-9 * s[0]) == 6
+    assert np.linalg.norm(vt[6:] @ dq) <= 1e-9 * np.linalg.norm(dq)
+
+
+def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    q = jnp.zeros(robot.n_joints)
+    with pytest.raises(ValueError, match="no marker 'nose'"):
+        compensate_tree_row(robot, q, jnp.zeros(3), at="nose")
+    path = jaxcal.read_path("tests/data/dlr_agile_justin.csv", robot)
+    with pytest.raises(ValueError, match="does not propagate a covariance"):
+        jaxcal.compensate(robot, path.subset(np.arange(2)), np.eye(3))
+    # A path file without the robot's joint columns: named, exit 2.
+    bad = tmp_path / "path.csv"
+    bad.write_text("\n".join((HEADER, *ROWS)) + "\n")
+    args = ["compensate", str(bad), "--robot", "dlr_agile_justin", "-o", str(tmp_path / "o.csv")]
+    assert main(args) == 2
+    assert "q7_deg" in capsys.readouterr().err
