@@ -1,12 +1,17 @@
-"""Compliance error compensation of robots given as kinematic trees: the FANUC as a tree
-gives the template model's commands (command line, same path file), a redundant robot
+"""Compliance error compensation of robots given as kinematic trees: the FANUC as a tree,
+calibrated and saved, gives the template model's commands and predicted residual std
+(command line, same path file, same springs and covariance), a redundant robot
 (Agile Justin, 19 joints) gets the least-norm correction that lands its tool marker,
 and what a tree robot cannot be compensated for is named."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
+import warnings
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -18,6 +23,7 @@ import jaxcal
 from jaxcal.compensation import compensate_tree_row
 from jaxcal.internal.cli import main
 
+EXAMPLE = Path(__file__).parent / "data" / "example_calibration.csv"
 HEADER = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N,mx_Nm,my_Nm,mz_Nm"
 ROWS = (
     "10,20,-30,40,50,60,0,0,-3000,0,0,0",
@@ -31,29 +37,61 @@ def _commands(path):
         return list(csv.DictReader(fh))
 
 
-def test_fanuc_as_a_tree_gives_the_template_models_commands(tmp_path, capsys):
-    """The two models of the FANUC agree to 2 nm in deflection (tests/test_quasi_serial.py),
-    which moves a command by at most ~2e-9 m over the arm's ≥ 0.5 m lever: 4e-9 rad,
-    2.3e-7 deg. The commands files are compared at 3e-7 deg, the deflections at the
-    file's 1e-6 mm; both models land their own tool within 1 nm."""
-    tree = tmp_path / "fanuc_tree.json"
-    assert main(["export", "-o", str(tree)]) == 0
-    capsys.readouterr()
+@pytest.fixture(scope="module")
+def calibrated_tree(tmp_path_factory):
+    """The FANUC as a tree (`jaxcal export`), its joint springs calibrated on the
+    example's deflections and saved (`identify --save-robot`): (saved file, JSON)."""
+    d = tmp_path_factory.mktemp("tree")
+    tree, cal = d / "fanuc_tree.json", d / "cal.json"
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["export", "-o", str(tree)]) == 0
+    args = ["identify", str(EXAMPLE), "--robot", str(tree), "--params", "joint-compliance"]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # what it says of the example data is not tested
+        assert main([*args, "--save-robot", str(cal), "--json", "--no-advice"]) == 0
+    return cal, json.loads(out.getvalue())
+
+
+def test_fanuc_as_a_tree_gives_the_template_models_commands_and_res_std(
+    calibrated_tree, tmp_path, capsys
+):
+    """The saved tree calibration compensates a path from the command line (its
+    covariance read back from the file); the template model with the same springs and
+    the same covariance gives the same commands and predicted residual std. The two
+    models agree to 2 nm in deflection (tests/test_quasi_serial.py), which moves a
+    command by at most ~2e-9 m over the arm's ≥ 0.5 m lever: 4e-9 rad, 2.3e-7 deg; the
+    files are compared at 3e-7 deg, the deflections at 2e-6 mm (their last digit), the
+    stds (the same first-order propagation through either model) at 1e-4 relative."""
+    cal, fitted = calibrated_tree
+    saved = json.loads(cal.read_text())["calibration"]["covariance"]
+    assert saved["parameters"] == [f"J{i}.k_theta" for i in range(1, 7)]
     path = tmp_path / "path.csv"
     path.write_text("\n".join((HEADER, *ROWS)) + "\n")
-    out = {}
-    for name, extra in (("tree", ["--robot", str(tree)]), ("template", [])):
-        out[name] = tmp_path / f"{name}.csv"
-        assert main(["compensate", str(path), "-o", str(out[name]), *extra, "--json"]) == 0
-        s = json.loads(capsys.readouterr().out)
-        assert s["compensated"] == len(ROWS) and s["max_residual_um"] < 1e-3, s
-    tree_rows, template_rows = _commands(out["tree"]), _commands(out["template"])
-    for a, b in zip(tree_rows, template_rows, strict=True):
-        for i in range(1, 7):
-            assert abs(float(a[f"qc{i}_deg"]) - float(b[f"qc{i}_deg"])) <= 3e-7, (i, a, b)
-        for c in ("model_dx_mm", "model_dy_mm", "model_dz_mm"):
-            assert abs(float(a[c]) - float(b[c])) <= 2e-6, (c, a, b)
-    assert "res_std_mm" not in tree_rows[0]
+    out = tmp_path / "tree.csv"
+    assert main(["compensate", str(path), "-o", str(out), "--robot", str(cal), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["compensated"] == len(ROWS) and s["max_residual_um"] < 1e-3 and s["calibrated"]
+    rows = _commands(out)
+    # The template model with the tree's springs and covariance (k1..k6; Kc, s0 held).
+    robot = jaxcal.load_robot()
+    value = {p["name"]: p["value"] for p in fitted["parameters"]}
+    p = np.asarray(jaxcal.get_parameters(robot)).copy()
+    p[:6] = [value[f"J{i}.k_theta"] for i in range(1, 7)]
+    cov = np.zeros((len(p), len(p)))
+    cov[:6, :6] = saved["matrix"]  # µrad/(N·m) in both
+    template = jaxcal.set_parameters(robot, jnp.asarray(p))
+    comp = jaxcal.compensate(template, jaxcal.read_path(path, template), jnp.asarray(cov))
+    qc, d = np.degrees(np.asarray(comp.rows.qc)), np.asarray(comp.rows.deflection) * 1e3
+    std = np.asarray(comp.rows.res_std) * 1e3
+    for r, row in enumerate(rows):
+        for i in range(6):
+            assert abs(float(row[f"qc{i + 1}_deg"]) - qc[r, i]) <= 3e-7, (r, i)
+        for i, c in enumerate(("model_dx_mm", "model_dy_mm", "model_dz_mm")):
+            assert abs(float(row[c]) - d[r, i]) <= 2e-6, (r, c)
+        assert float(row["res_std_mm"]) == pytest.approx(std[r], rel=1e-4, abs=1e-6)
+    assert std.min() > 1e-4  # a spread worth comparing (mm)
 
 
 def test_redundant_robot_gets_the_least_norm_correction():
@@ -96,8 +134,11 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
     with pytest.raises(ValueError, match="no marker 'nose'"):
         compensate_tree_row(robot, q, jnp.zeros(3), at="nose")
     path = jaxcal.read_path("tests/data/dlr_agile_justin.csv", robot)
-    with pytest.raises(ValueError, match="does not propagate a covariance"):
+    with pytest.raises(ValueError, match="a TreeCalibration or"):
         jaxcal.compensate(robot, path.subset(np.arange(2)), np.eye(3))
+    table = jaxcal.parameter_table(robot, ("joint-compliance",))
+    with pytest.raises(ValueError, match=f"must be {len(table)}x{len(table)}"):
+        jaxcal.compensate(robot, path.subset(np.arange(2)), (table, np.eye(3)))
     # A path file without the robot's joint columns: named, exit 2.
     bad = tmp_path / "path.csv"
     bad.write_text("\n".join((HEADER, *ROWS)) + "\n")

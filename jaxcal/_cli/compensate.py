@@ -41,8 +41,7 @@ def register(sub) -> None:
             "given as a kinematic tree (a tree robot file, a URDF, or a robot file "
             "identify --save-robot wrote for one) takes its joints' columns q1_deg..qN_deg "
             "(q_mm for a prismatic joint), its tool is its first marker (where the loads "
-            "act), with more than six joints the correction is the least-norm one, and "
-            "res_std_mm is not given (its calibration's covariance is not propagated)."
+            "act), and with more than six joints the correction is the least-norm one."
         ),
     )
     p.add_argument("path", metavar="PATH.csv", help="programmed angles and process wrench")
@@ -66,9 +65,10 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._identification.calibration import load_calibrated
+    from .._identification.tree_covariance import saved_covariance
     from .._model.robot_files import is_tree_file
     from ..compensation import compensate, read_path, write_commands
-    from .tree import tree_robot
+    from .tree import saved_block, tree_robot
 
     inputs = {"the path file": args.path, "the robot file": args.robot}
     # The commands: the path's rows with about twice their columns.
@@ -80,6 +80,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
     if is_tree_file(args.robot):
         robot, calibration = tree_robot(args), None
+        block = saved_block(args.robot).get("covariance")
+        if block is not None:
+            calibration = saved_covariance(robot, block)
     else:
         robot, calibration = load_calibrated(args.robot)
     path = read_path(args.path, robot)
@@ -120,8 +123,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace, comp, calibration, written: int, output) -> int:
-    from .._model.robot_files import is_tree_file
-
     # `output`: the commands file, None when the commands went to standard output.
     s = comp.summary()
     refused = s["refused"]
@@ -140,9 +141,6 @@ def _report(args: argparse.Namespace, comp, calibration, written: int, output) -
         ]
         if s["max_res_std_mm"] is not None:
             rows.append(["max predicted residual std", f"{s['max_res_std_mm']:.4f} mm"])
-        elif is_tree_file(args.robot):
-            why = "not propagated for a robot given as a kinematic tree"
-            rows.append(["predicted residual std", f"n/a ({why})"])
         else:
             rows.append(["predicted residual std", "n/a (robot file has no calibration)"])
         print(format_table(["compensation", ""], rows))

@@ -8,6 +8,7 @@ import argparse
 import datetime
 import json
 import sys
+from pathlib import Path
 
 import equinox as eqx
 import numpy as np
@@ -19,6 +20,17 @@ from .main import (
     print_json,
     priors_of,
 )
+
+
+def saved_block(spec) -> dict:
+    """The `"calibration"` block of a robot file that `identify --save-robot` wrote (a
+    JSON file); empty for a preset, a URDF or an uncalibrated file."""
+    try:
+        d = json.loads(Path(spec).read_text())
+    except (OSError, ValueError):
+        return {}
+    block = d.get("calibration") if isinstance(d, dict) else None
+    return block if isinstance(block, dict) else {}
 
 
 def tree_robot(args):
@@ -46,6 +58,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._identification.elastogeometric import calibrate_tree
     from .._identification.parameter_groups import parse_groups
     from .._identification.result import relative_std
+    from .._identification.tree_covariance import covariance_block
     from .._io import atomic_file
     from .._model.tree_files import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path
@@ -113,6 +126,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             "held": list(cal.held),
             "not_determined": list(cal.not_determined),
             "priors": priors,
+            "covariance": covariance_block(cal.table, cal.fitted, np.asarray(cal.fit.covariance)),
         }
         try:
             if urdf_out:

@@ -21,6 +21,7 @@ from jaxtyping import Array, Float
 
 from .._batching import chunk_width, map_in_chunks
 from .._identification.calibration import Calibration
+from .._identification.elastogeometric import TreeCalibration
 from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_file, input_cells, read_dataset
 from .._markers import MarkerData, joint_units, marker_columns, read_markers
 from .._model.tree import TreeRobot
@@ -146,7 +147,7 @@ def compensate_rows(robot, q, force, moment, covariance, max_cond, length_scale,
 def compensate(
     robot: Robot | TreeRobot,
     path: Dataset | MarkerData,
-    calibration: Calibration | Float[Array, "P P"] | None = None,
+    calibration: Calibration | TreeCalibration | tuple | Float[Array, "P P"] | None = None,
     *,
     max_cond: float = 500.0,
     length_scale: float = 1.0,
@@ -160,8 +161,9 @@ def compensate(
       whose tool is its first marker (`compensate_tree_row`).
     - `path`: programmed angles and process wrench per row (`read_path`).
     - `calibration`: a `Calibration` (from `jaxcal.read_calibration`) or a covariance of
-      all physical parameters (user units): gives each row's `res_std` (FANUC-form
-      robots only).
+      all physical parameters (user units); for a tree robot a `TreeCalibration` or
+      `(table, covariance)` (SI, as `saved_covariance` reads a saved robot file's):
+      gives each row's `res_std`.
     - `max_cond`, `length_scale`, `tol`: see `compensate_row`.
 
     Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
@@ -209,10 +211,19 @@ def compensate(
 def _compensate_tree(robot, path, calibration, max_cond, length_scale, tol) -> Compensation:
     if not isinstance(path, MarkerData):
         raise ValueError("path: a tree robot's path is read by read_path(file, robot)")
-    if calibration is not None:
+    table, cov = (), None
+    if isinstance(calibration, TreeCalibration):
+        table, cov = calibration.table, jnp.asarray(calibration.fit.covariance)
+    elif isinstance(calibration, tuple) and len(calibration) == 2:
+        table, cov = tuple(calibration[0]), jnp.asarray(calibration[1], robot.compliance.dtype)
+    elif calibration is not None:
         raise ValueError(
-            "calibration: a tree robot's compensation does not propagate a covariance "
-            "(res_std); pass None"
+            "calibration: for a tree robot, a TreeCalibration or (table, covariance) "
+            "(saved_covariance of its saved robot file)"
+        )
+    if cov is not None and cov.shape != (len(table), len(table)):
+        raise ValueError(
+            f"calibration covariance must be {len(table)}x{len(table)}, got {cov.shape}"
         )
     at = tool_marker(robot)
     q = jnp.asarray(path.q)
@@ -220,7 +231,7 @@ def _compensate_tree(robot, path, calibration, max_cond, length_scale, tol) -> C
     moment = None if path.moment is None else jnp.asarray(path.moment)
     settings = (float(max_cond), float(length_scale), float(tol))
     rows = map_in_chunks(
-        lambda q, f, m: tree_rows(robot, q, f, m, at, *settings),
+        lambda q, f, m: tree_rows(robot, q, f, m, cov, table, at, *settings),
         len(path),
         chunk_rows(),
         q,

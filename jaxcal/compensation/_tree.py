@@ -10,9 +10,11 @@ steps from the rigid robot's deflections). A robot with more active joints than 
 pose's six equations gets the least-norm correction: joints that do not move the tool
 (Agile Justin's other arm) keep their programmed values.
 
-A tree robot's compensation does not propagate a parameter covariance: `res_cov` and
-`res_std` are NaN (its saved robot file holds each parameter's std, not their
-covariance, and the residual's spread depends on the correlations).
+With the covariance of a calibration's parameters (a `TreeCalibration`'s, or the one
+its saved robot file keeps: `_identification/tree_covariance.py`), each row's `res_cov`
+is the covariance of the tool point's residual that it leaves at the compensated
+values, to first order (`G Σ Gᵀ`, `G` the autodiff Jacobian of the loaded tool point at
+`qc` minus the target, both equilibria moving with the parameters); without, NaN.
 
 Functions here handle one row; `compensate` vmaps them over a path.
 """
@@ -24,6 +26,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._identification.parameter_groups import Parameter, get_vector, set_vector
 from .._model.tree import TreeRobot
 from .._model.tree_kinematics import marker_index, marker_pose
 from .._model.tree_statics import tree_equilibrium
@@ -53,7 +56,9 @@ def compensate_tree_row(
     q: Float[Array, " n"],
     force: Float[Array, 3] | None = None,
     moment: Float[Array, 3] | None = None,
+    covariance: Float[Array, "P P"] | None = None,
     *,
+    table: tuple[Parameter, ...] = (),
     at: int | str = 0,
     max_cond: float = 500.0,
     length_scale: float = 1.0,
@@ -66,6 +71,8 @@ def compensate_tree_row(
     - `q`: programmed joint values (rad; m for a prismatic joint); `force` (N) and
       `moment` (N·m): process wrench at the tool marker `at` (a name or an index;
       default the first, where the data format's loads act), base frame.
+    - `covariance`: `(P, P)` covariance (SI) of the parameters `table` (e.g. a
+      `TreeCalibration`'s `table` and `fit.covariance`), propagated into `res_std`.
     - `max_cond`, `length_scale`, `tol`: as `compensate_row`'s (the condition number is
       of the rigid-body Jacobian's nonzero singular values).
 
@@ -116,7 +123,14 @@ def compensate_tree_row(
     lim = robot.joint_limits.astype(dtype)
     within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
     res_cov = jnp.full((3, 3), jnp.nan, dtype)
-    res_std = jnp.full((), jnp.nan, dtype)
+    if covariance is not None:
+        if jnp.shape(covariance) != (len(table), len(table)):
+            raise ValueError(
+                f"covariance must be {len(table)}x{len(table)} (one row per parameter of "
+                f"table), got {jnp.shape(covariance)}"
+            )
+        res_cov = _residual_covariance(robot, table, q, qc, force, moment, i, covariance)
+    res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
     # One reason per row, the most basic cause last (it wins), as `compensate_row`.
     result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
     result = RESULTS.where(solved & verified, result, RESULTS.out_of_reach)
@@ -125,11 +139,36 @@ def compensate_tree_row(
     return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
 
 
+def _residual_covariance(robot, table, q, qc, force, moment, at, covariance):
+    """`G Σ Gᵀ` (m²) of the tool point's residual at fixed `qc` (see the module
+    docstring)."""
+    qc = jax.lax.stop_gradient(qc)
+
+    def residual(p):
+        rb = set_vector(robot, table, p)
+        loaded = tree_equilibrium(rb, qc, force=force, moment=moment, at=at)
+        free = tree_equilibrium(rb, q)
+        return marker_pose(rb, qc, loaded.phi, at)[1] - marker_pose(rb, q, free.phi, at)[1]
+
+    G = jax.jacfwd(residual)(get_vector(robot, table))
+    C = G @ covariance @ G.T
+    return 0.5 * (C + C.T)
+
+
 @eqx.filter_jit
-def tree_rows(robot, q, force, moment, at, max_cond, length_scale, tol):
+def tree_rows(robot, q, force, moment, covariance, table, at, max_cond, length_scale, tol):
     """`compensate_tree_row` vmapped over rows (`moment` `None`: no moments)."""
     one = lambda a, b, c: compensate_tree_row(
-        robot, a, b, c, at=at, max_cond=max_cond, length_scale=length_scale, tol=tol
+        robot,
+        a,
+        b,
+        c,
+        covariance,
+        table=table,
+        at=at,
+        max_cond=max_cond,
+        length_scale=length_scale,
+        tol=tol,
     )
     if moment is None:
         return jax.vmap(lambda a, b: one(a, b, None))(q, force)
