@@ -60,6 +60,7 @@ from ._identification.parameter_groups import (
     default_groups as default_groups,
     parameter_table as parameter_table,
 )
+from ._identification.tree_covariance import saved_covariance as saved_covariance
 from ._identification.tree_validation import (
     Stage as Stage,
     marker_errors as marker_errors,

@@ -139,6 +139,16 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
     table = jaxcal.parameter_table(robot, ("joint-compliance",))
     with pytest.raises(ValueError, match=f"must be {len(table)}x{len(table)}"):
         jaxcal.compensate(robot, path.subset(np.arange(2)), (table, np.eye(3)))
+    # A saved covariance block: printed units back to SI; what does not fit is named.
+    table, cov = jaxcal.saved_covariance(
+        robot, {"parameters": ["torso_2.k_theta"], "matrix": [[4.0]]}
+    )
+    assert [p.name for p in table] == ["torso_2.k_theta"]
+    assert cov.shape == (1, 1) and cov[0, 0] == pytest.approx(4e-12)  # (µrad/(N·m))² to SI
+    with pytest.raises(ValueError, match="has no \\['nose.k_theta'\\]"):
+        jaxcal.saved_covariance(robot, {"parameters": ["nose.k_theta"], "matrix": [[1.0]]})
+    with pytest.raises(ValueError, match="finite 1x1"):
+        jaxcal.saved_covariance(robot, {"parameters": ["torso_2.k_theta"], "matrix": [[1, 2]]})
     # A path file without the robot's joint columns: named, exit 2.
     bad = tmp_path / "path.csv"
     bad.write_text("\n".join((HEADER, *ROWS)) + "\n")
