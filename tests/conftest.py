@@ -55,7 +55,6 @@ _SLOWEST_FILES = {
     "test_montecarlo.py": 62,
     "test_urdf_export.py": 56,
     "test_identification.py": 45,
-    "test_compensation_tree.py": 45,
     "test_cli_identify.py": 36,
     "test_select.py": 36,
     "test_bad_input.py": 24,

@@ -2,7 +2,8 @@
 calibrated and saved, gives the template model's commands and predicted residual std
 (command line, same path file, same springs and covariance), a redundant robot
 (Agile Justin, 19 joints) gets the least-norm correction that lands its tool marker,
-and what a tree robot cannot be compensated for is named."""
+on a pose taught under gravity or planned on the rigid model, and what a tree robot
+cannot be compensated for is named."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from jaxcal.compensation import compensate_tree_row
 from jaxcal.internal.cli import main
 
 EXAMPLE = Path(__file__).parent / "data" / "example_calibration.csv"
+JUSTIN = EXAMPLE.parent / "dlr_agile_justin.csv"
 HEADER = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N,mx_Nm,my_Nm,mz_Nm"
 ROWS = (
     "10,20,-30,40,50,60,0,0,-3000,0,0,0",
@@ -105,7 +107,7 @@ def test_redundant_robot_gets_the_least_norm_correction():
     robot = eqx.tree_at(
         lambda r: r.compliance, robot, robot.compliance.at[rev].set(jnp.array([8e-6, 3e-6, 3e-6]))
     )
-    data = jaxcal.read_markers("tests/data/dlr_agile_justin.csv", robot)
+    data = jaxcal.read_markers(JUSTIN, robot)
     q = jnp.asarray(data.q[0])
     row = jax.jit(lambda q: compensate_tree_row(robot, q, jnp.array([0.0, 0.0, -50.0])))(q)
     assert row.result == jaxcal.RESULTS.successful
@@ -126,6 +128,20 @@ def test_redundant_robot_gets_the_least_norm_correction():
     _, s, vt = np.linalg.svd(np.asarray(J))
     assert np.sum(s > 1e-9 * s[0]) == 6
     assert np.linalg.norm(vt[6:] @ dq) <= 1e-9 * np.linalg.norm(dq)
+    # The left hand as the tool, its pose planned on the rigid model, no load: the
+    # correction removes the robot's own sag, moving the torso and the left arm only, and
+    # under gravity at qc the hand is where the rigid model puts it at q (checked by a
+    # fresh equilibrium and the public kinematics).
+    rigid = jax.jit(lambda q: compensate_tree_row(robot, q, at="left", target="rigid"))(q)
+    assert rigid.result == jaxcal.RESULTS.successful
+    assert float(jnp.linalg.norm(rigid.deflection)) > 1e-4  # m: the sag (0.4 mm here)
+    dq = np.asarray(rigid.qc - q)
+    others = [i for i, n in enumerate(robot.joint_names) if n.startswith(("right", "head"))]
+    assert np.all(dq[others] == 0.0) and np.abs(dq).max() > 1e-5
+    phi = jaxcal.tree_equilibrium(robot, rigid.qc).phi
+    planned, landed = jaxcal.element_frames(robot, q), jaxcal.element_frames(robot, rigid.qc, phi)
+    left = robot.marker_element[robot.marker_names.index("left")]
+    np.testing.assert_allclose(landed[left], planned[left], rtol=0, atol=1e-9)
 
 
 def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
@@ -133,7 +149,7 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
     q = jnp.zeros(robot.n_joints)
     with pytest.raises(ValueError, match="no marker 'nose'"):
         compensate_tree_row(robot, q, jnp.zeros(3), at="nose")
-    path = jaxcal.read_path("tests/data/dlr_agile_justin.csv", robot)
+    path = jaxcal.read_path(JUSTIN, robot)
     with pytest.raises(ValueError, match="a TreeCalibration or"):
         jaxcal.compensate(robot, path.subset(np.arange(2)), np.eye(3))
     table = jaxcal.parameter_table(robot, ("joint-compliance",))
@@ -149,6 +165,18 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
         jaxcal.saved_covariance(robot, {"parameters": ["nose.k_theta"], "matrix": [[1.0]]})
     with pytest.raises(ValueError, match="finite 1x1"):
         jaxcal.saved_covariance(robot, {"parameters": ["torso_2.k_theta"], "matrix": [[1, 2]]})
+    with pytest.raises(ValueError, match="no marker 'nose'"):
+        jaxcal.compensate(robot, path.subset(np.arange(2)), tool="nose")
+    # A rigid target and a choice of tool are the general model's: the FANUC-form model
+    # says where to go.
+    fanuc = tmp_path / "fanuc.csv"
+    fanuc.write_text("\n".join((HEADER, *ROWS)) + "\n")
+    args = ["compensate", str(fanuc), "--target", "rigid", "-o", str(tmp_path / "o.csv")]
+    assert main(args) == 2
+    assert "jaxcal export -o TREE.json" in capsys.readouterr().err
+    args = ["compensate", str(fanuc), "--tool", "tool", "-o", str(tmp_path / "o.csv")]
+    assert main(args) == 2
+    assert "--tool: for a robot given as a kinematic tree" in capsys.readouterr().err
     # A path file without the robot's joint columns: named, exit 2.
     bad = tmp_path / "path.csv"
     bad.write_text("\n".join((HEADER, *ROWS)) + "\n")

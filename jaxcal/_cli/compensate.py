@@ -40,8 +40,8 @@ def register(sub) -> None:
             "named with the reason and not written; the exit status is then 1. A robot "
             "given as a kinematic tree (a tree robot file, a URDF, or a robot file "
             "identify --save-robot wrote for one) takes its joints' columns q1_deg..qN_deg "
-            "(q_mm for a prismatic joint), its tool is its first marker (where the loads "
-            "act), and with more than six joints the correction is the least-norm one."
+            "(q_mm for a prismatic joint), its tool is its first marker or --tool (where the "
+            "loads act), and with more than six joints the correction is the least-norm one."
         ),
     )
     p.add_argument("path", metavar="PATH.csv", help="programmed angles and process wrench")
@@ -57,6 +57,21 @@ def register(sub) -> None:
         metavar="C",
         help="refuse rows whose arm Jacobian's condition number exceeds C (default 500; "
         "typical rows are at 3-30, a wrist within 0.06 deg of q5 = 0 above 1000)",
+    )
+    p.add_argument(
+        "--target",
+        choices=("gravity", "rigid"),
+        default="gravity",
+        help="where a row's tool should be: at its programmed angles under gravity (default: "
+        "a path taught on the robot) or, for a robot given as a kinematic tree, in its rigid "
+        "kinematic model (a path planned offline, which the robot's weight deflects too)",
+    )
+    p.add_argument(
+        "--tool",
+        metavar="MARKER",
+        default=None,
+        help="for a robot given as a kinematic tree: the marker that is the tool, where the "
+        "path's wrench acts (default: its first marker)",
     )
     p.add_argument("--plot", metavar="FILE.png", help="path error before and after, with ±2σ")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -87,7 +102,12 @@ def run(args: argparse.Namespace) -> int:
         robot, calibration = load_calibrated(args.robot)
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)
-    comp = compensate(robot, path, calibration, max_cond=args.max_cond)
+    if args.tool is not None and not is_tree_file(args.robot):
+        raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
+    tool = 0 if args.tool is None else args.tool
+    comp = compensate(
+        robot, path, calibration, max_cond=args.max_cond, target=args.target, tool=tool
+    )
     try:
         written = write_commands(args.output, comp)
     except OSError as e:

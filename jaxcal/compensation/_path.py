@@ -29,7 +29,7 @@ from .._precision import require_float64
 from .._robot import Robot
 from .._solution import RESULTS, messages
 from ._solve import RowCompensation, compensate_row
-from ._tree import tool_marker, tree_rows
+from ._tree import TARGETS, tool_marker, tree_rows
 
 __all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
 
@@ -152,6 +152,8 @@ def compensate(
     max_cond: float = 500.0,
     length_scale: float = 1.0,
     tol: float = 1e-8,
+    target: str = "gravity",
+    tool: int | str = 0,
 ) -> Compensation:
     """Compensated joint angles for every row of `path` (vectorised over the rows).
 
@@ -165,6 +167,11 @@ def compensate(
       `(table, covariance)` (SI, as `saved_covariance` reads a saved robot file's):
       gives each row's `res_std`.
     - `max_cond`, `length_scale`, `tol`: see `compensate_row`.
+    - `target`: where each row's tool should be: `"gravity"`, at its programmed angles
+      under gravity (a taught path), or, for a tree robot, `"rigid"`, in its rigid
+      kinematic model (a path planned offline); see `compensate_tree_row`.
+    - `tool`: for a tree robot, the marker (name or index) that is the tool, where the
+      path's wrench acts (default the first).
 
     Raises `ValueError` for float64 off or non-finite inputs. Rows that cannot be
     compensated are not raised but refused (`Compensation.refused()`).
@@ -182,8 +189,18 @@ def compensate(
         if bad.any():
             rows = ", ".join(str(i + 1) for i in np.flatnonzero(bad)[:20])
             raise ValueError(f"path: non-finite {name} in row(s) {rows}")
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
     if isinstance(robot, TreeRobot):
-        return _compensate_tree(robot, path, calibration, max_cond, length_scale, tol)
+        at = tool_marker(robot, tool)
+        return _compensate_tree(robot, path, calibration, max_cond, length_scale, tol, target, at)
+    if tool != 0:
+        raise ValueError(f"tool {tool!r}: the FANUC-form robot's tool is its tool point")
+    if target != "gravity":
+        raise ValueError(
+            f"target {target!r}: for a robot given as a kinematic tree (jaxcal export -o "
+            "TREE.json writes the FANUC as one)"
+        )
     if not isinstance(path, Dataset):
         raise ValueError("path: the FANUC-form robot's path is read by read_path(file, robot)")
     cov = None
@@ -208,7 +225,9 @@ def compensate(
     return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)
 
 
-def _compensate_tree(robot, path, calibration, max_cond, length_scale, tol) -> Compensation:
+def _compensate_tree(
+    robot, path, calibration, max_cond, length_scale, tol, target, at
+) -> Compensation:
     if not isinstance(path, MarkerData):
         raise ValueError("path: a tree robot's path is read by read_path(file, robot)")
     table, cov = (), None
@@ -225,13 +244,12 @@ def _compensate_tree(robot, path, calibration, max_cond, length_scale, tol) -> C
         raise ValueError(
             f"calibration covariance must be {len(table)}x{len(table)}, got {cov.shape}"
         )
-    at = tool_marker(robot)
     q = jnp.asarray(path.q)
     force = jnp.zeros_like(q[:, :3]) if path.force is None else jnp.asarray(path.force)
     moment = None if path.moment is None else jnp.asarray(path.moment)
     settings = (float(max_cond), float(length_scale), float(tol))
     rows = map_in_chunks(
-        lambda q, f, m: tree_rows(robot, q, f, m, cov, table, at, *settings),
+        lambda q, f, m: tree_rows(robot, q, f, m, cov, table, at, target, *settings),
         len(path),
         chunk_rows(),
         q,

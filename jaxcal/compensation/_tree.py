@@ -3,12 +3,15 @@ the problem and the iteration of `_solve.py` (`corrected_commands`) for the pose
 of its markers, the tool, where the process wrench acts.
 
 The target of a row is the tool's pose (its marker's position and its element's
-orientation) at the programmed joint values under gravity alone; the compensated values
-`qc` put it there under gravity and the wrench. Each equilibrium is the tree's own
-(`tree_equilibrium`), solved afresh at every step of the iteration (a few fixed-point
-steps from the rigid robot's deflections). A robot with more active joints than the
-pose's six equations gets the least-norm correction: joints that do not move the tool
-(Agile Justin's other arm) keep their programmed values.
+orientation) at the programmed joint values under gravity alone (`target="gravity"`: a
+path taught on the robot), or in the rigid kinematic model (`target="rigid"`: a path
+planned offline, in CAD or by a motion planner, which the robot's own weight deflects
+too); the compensated values `qc` put the tool there under gravity and the wrench.
+Each equilibrium is the tree's own (`tree_equilibrium`), solved afresh at every step of
+the iteration (a few fixed-point steps from the rigid robot's deflections). A robot
+with more active joints than the pose's six equations gets the least-norm correction:
+joints that do not move the tool (Agile Justin's other arm) keep their programmed
+values.
 
 With the covariance of a calibration's parameters (a `TreeCalibration`'s, or the one
 its saved robot file keeps: `_identification/tree_covariance.py`), each row's `res_cov`
@@ -33,11 +36,15 @@ from .._model.tree_statics import tree_equilibrium
 from .._solution import RESULTS
 from ._solve import RowCompensation, condition_number, corrected_commands, pose_error
 
-__all__ = ["compensate_tree_row", "tool_marker", "tree_rows"]
+__all__ = ["TARGETS", "compensate_tree_row", "tool_marker", "tree_rows"]
 
 #: Pose equations of a tool (position and orientation): the fewest active joints a
 #: robot needs to be compensated.
 _POSE = 6
+
+#: Where a row's target is: the tool at the programmed values under gravity, or in the
+#: rigid kinematic model.
+TARGETS = ("gravity", "rigid")
 
 
 def tool_marker(robot: TreeRobot, at: int | str = 0) -> int:
@@ -60,6 +67,7 @@ def compensate_tree_row(
     *,
     table: tuple[Parameter, ...] = (),
     at: int | str = 0,
+    target: str = "gravity",
     max_cond: float = 500.0,
     length_scale: float = 1.0,
     tol: float = 1e-8,
@@ -73,6 +81,9 @@ def compensate_tree_row(
       default the first, where the data format's loads act), base frame.
     - `covariance`: `(P, P)` covariance (SI) of the parameters `table` (e.g. a
       `TreeCalibration`'s `table` and `fit.covariance`), propagated into `res_std`.
+    - `target`: `"gravity"` (the tool at `q` under gravity) or `"rigid"` (at `q` in the
+      rigid kinematic model); `deflection` and `rotation` are the loaded tool's error
+      against it at `q`.
     - `max_cond`, `length_scale`, `tol`: as `compensate_row`'s (the condition number is
       of the rigid-body Jacobian's nonzero singular values).
 
@@ -80,12 +91,14 @@ def compensate_tree_row(
     an unknown marker; never raises on values: check `result` (for use under `jax.vmap`).
     """
     i = tool_marker(robot, at)
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
     dtype = jnp.result_type(q, robot.compliance)
     q = jnp.asarray(q, dtype)
     force = jnp.zeros(3, dtype) if force is None else jnp.asarray(force, dtype)
     free = tree_equilibrium(robot, q)
     loaded = tree_equilibrium(robot, q, force=force, moment=moment, at=i)
-    R_t, p_t = marker_pose(robot, q, free.phi, i)
+    R_t, p_t = marker_pose(robot, q, free.phi if target == "gravity" else None, i)
     R_l, p_l = marker_pose(robot, q, loaded.phi, i)
     deflection, rotation = pose_error(p_t, R_t, p_l, R_l)
     frozen = jax.lax.stop_gradient(loaded.phi)
@@ -129,7 +142,7 @@ def compensate_tree_row(
                 f"covariance must be {len(table)}x{len(table)} (one row per parameter of "
                 f"table), got {jnp.shape(covariance)}"
             )
-        res_cov = _residual_covariance(robot, table, q, qc, force, moment, i, covariance)
+        res_cov = _residual_covariance(robot, table, q, qc, force, moment, i, target, covariance)
     res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
     # One reason per row, the most basic cause last (it wins), as `compensate_row`.
     result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
@@ -139,7 +152,7 @@ def compensate_tree_row(
     return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
 
 
-def _residual_covariance(robot, table, q, qc, force, moment, at, covariance):
+def _residual_covariance(robot, table, q, qc, force, moment, at, target, covariance):
     """`G Σ Gᵀ` (m²) of the tool point's residual at fixed `qc` (see the module
     docstring)."""
     qc = jax.lax.stop_gradient(qc)
@@ -147,8 +160,8 @@ def _residual_covariance(robot, table, q, qc, force, moment, at, covariance):
     def residual(p):
         rb = set_vector(robot, table, p)
         loaded = tree_equilibrium(rb, qc, force=force, moment=moment, at=at)
-        free = tree_equilibrium(rb, q)
-        return marker_pose(rb, qc, loaded.phi, at)[1] - marker_pose(rb, q, free.phi, at)[1]
+        phi = tree_equilibrium(rb, q).phi if target == "gravity" else None
+        return marker_pose(rb, qc, loaded.phi, at)[1] - marker_pose(rb, q, phi, at)[1]
 
     G = jax.jacfwd(residual)(get_vector(robot, table))
     C = G @ covariance @ G.T
@@ -156,7 +169,7 @@ def _residual_covariance(robot, table, q, qc, force, moment, at, covariance):
 
 
 @eqx.filter_jit
-def tree_rows(robot, q, force, moment, covariance, table, at, max_cond, length_scale, tol):
+def tree_rows(robot, q, force, moment, covariance, table, at, target, max_cond, length_scale, tol):
     """`compensate_tree_row` vmapped over rows (`moment` `None`: no moments)."""
     one = lambda a, b, c: compensate_tree_row(
         robot,
@@ -166,6 +179,7 @@ def tree_rows(robot, q, force, moment, covariance, table, at, max_cond, length_s
         covariance,
         table=table,
         at=at,
+        target=target,
         max_cond=max_cond,
         length_scale=length_scale,
         tol=tol,

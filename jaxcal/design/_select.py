@@ -99,11 +99,14 @@ def _with_rows(inv, criterion: str, W: np.ndarray, A: np.ndarray) -> np.ndarray:
     """The criterion of `M + A_cᵀ A_c` for every candidate `c` of `A` `(b, r, p)`, by the
     rank-r updates of `M⁻¹` (Woodbury) and `log det` (the matrix determinant lemma)."""
     Minv, logdet = inv
-    B = A @ Minv  # (b, r, p)
-    S = np.eye(A.shape[1]) + B @ A.transpose(0, 2, 1)
+    b, r, p = A.shape
+    # One matrix product over every candidate's rows, not one per candidate (numpy
+    # loops a stacked product): the exchange's largest cost.
+    B = (A.reshape(b * r, p) @ Minv).reshape(b, r, p)
+    S = np.eye(r) + B @ A.transpose(0, 2, 1)
     if criterion == "det":
         return logdet - np.linalg.slogdet(S)[1]
-    T = (B @ W) @ B.transpose(0, 2, 1)
+    T = (B.reshape(b * r, p) @ W).reshape(b, r, p) @ B.transpose(0, 2, 1)
     return float(np.sum(Minv * W)) - np.trace(np.linalg.solve(S, T), axis1=1, axis2=2)
 
 
