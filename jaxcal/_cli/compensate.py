@@ -93,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.plot, "--plot", inputs=plot_inputs, size=_PLOT_BYTES)
     if not args.max_cond > 1:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
+    if args.tool is not None and not is_tree_file(args.robot):
+        raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
     if is_tree_file(args.robot):
         robot, calibration = tree_robot(args), None
         block = saved_block(args.robot).get("covariance")
@@ -102,8 +104,6 @@ def run(args: argparse.Namespace) -> int:
         robot, calibration = load_calibrated(args.robot)
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)
-    if args.tool is not None and not is_tree_file(args.robot):
-        raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
     tool = 0 if args.tool is None else args.tool
     comp = compensate(
         robot, path, calibration, max_cond=args.max_cond, target=args.target, tool=tool
