@@ -41,6 +41,7 @@ __all__ = [
     "compensate_row",
     "corrected_commands",
     "condition_number",
+    "row_outcome",
     "pose_error",
     "landing_error",
 ]
@@ -189,6 +190,46 @@ def condition_number(J: Float[Array, "6 n"]) -> Float[Array, ""]:
     return jnp.where(jnp.all(jnp.isfinite(J)), cond, jnp.inf)
 
 
+def row_outcome(
+    qc: Float[Array, " n"],
+    J: Float[Array, "6 n"],
+    solved: Bool[Array, ""],
+    deflection: Float[Array, 3],
+    rotation: Float[Array, 3],
+    residual: tuple[Float[Array, 3], Float[Array, 3]],
+    settled: Bool[Array, ""],
+    roots_ok: Bool[Array, ""],
+    joint_limits: Float[Array, "n 2"],
+    res_cov: Float[Array, "3 3"],
+    *,
+    max_cond: float,
+    tol: float,
+) -> RowCompensation:
+    """A row's `RowCompensation`, whichever model computed it: the commands `qc`, the
+    rigid-body Jacobian `J` and whether the iteration `solved` (`corrected_commands`);
+    the load's `deflection` and `rotation` at the programmed angles; the `residual`
+    (position m, rotation rad) of an independent equilibrium at `qc` that `settled`
+    (converged, and stable where the model checks it); whether the equilibria at the
+    programmed angles converged (`roots_ok`); the residual's covariance (NaN: none)."""
+    res_p, res_r = residual
+    verified = (
+        settled
+        & (jnp.linalg.norm(res_p) <= tol)
+        & (jnp.linalg.norm(res_r) <= tol)
+        & jnp.all(jnp.isfinite(qc))
+    )
+    cond = condition_number(J)
+    lim = joint_limits.astype(qc.dtype)
+    within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
+    res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
+    # One reason per row, the most basic cause last (it wins).
+    result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
+    result = RESULTS.where(solved & verified, result, RESULTS.out_of_reach)
+    result = RESULTS.where(cond > max_cond, RESULTS.singular, result)
+    result = RESULTS.where(roots_ok, result, RESULTS.equilibrium_failed)
+    return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
+
+
 def compensate_row(
     robot: Robot,
     q: Float[Array, 6],
@@ -249,28 +290,23 @@ def compensate_row(
     p_c, R_c = tool_pose(robot, qc, eq.x)
     res_p, res_r = pose_error(p_t, R_t, p_c, R_c)
     res_p, res_r = jax.lax.stop_gradient(res_p), jax.lax.stop_gradient(res_r)
-    verified = (
-        eq.converged
-        & eq.stable
-        & (jnp.linalg.norm(res_p) <= tol)
-        & (jnp.linalg.norm(res_r) <= tol)
-        & jnp.all(jnp.isfinite(qc))
-    )
-    cond = condition_number(J)
-    lim = robot.joint_limits.astype(dtype)
-    within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
-
     res_cov = jnp.full((3, 3), jnp.nan, dtype)
     if covariance is not None:
         res_cov = _residual_covariance(robot, q, qc, force, moment, xu0, eq.x, covariance)
-    res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
-
-    # One reason per row, the most basic cause last (it wins).
-    result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
-    result = RESULTS.where(solved & verified, result, RESULTS.out_of_reach)
-    result = RESULTS.where(cond > max_cond, RESULTS.singular, result)
-    result = RESULTS.where(ok_u & ok_l, result, RESULTS.equilibrium_failed)
-    return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
+    return row_outcome(
+        qc,
+        J,
+        solved,
+        deflection,
+        rotation,
+        (res_p, res_r),
+        eq.converged & eq.stable,
+        ok_u & ok_l,
+        robot.joint_limits,
+        res_cov,
+        max_cond=max_cond,
+        tol=tol,
+    )
 
 
 def _residual_covariance(robot, q, qc, force, moment, x_u, x_c, covariance):

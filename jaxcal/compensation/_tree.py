@@ -33,8 +33,7 @@ from .._identification.parameter_groups import Parameter, get_vector, set_vector
 from .._model.tree import TreeRobot
 from .._model.tree_kinematics import marker_index, marker_pose
 from .._model.tree_statics import tree_equilibrium
-from .._solution import RESULTS
-from ._solve import RowCompensation, condition_number, corrected_commands, pose_error
+from ._solve import RowCompensation, corrected_commands, pose_error, row_outcome
 
 __all__ = ["TARGETS", "compensate_tree_row", "tool_marker", "tree_rows"]
 
@@ -125,16 +124,7 @@ def compensate_tree_row(
     # Verify with an independent solve at the result.
     eq = tree_equilibrium(robot, jax.lax.stop_gradient(qc), force=force, moment=moment, at=i)
     R_c, p_c = marker_pose(robot, qc, eq.phi, i)
-    res_p, res_r = jax.lax.stop_gradient(pose_error(p_t, R_t, p_c, R_c))
-    verified = (
-        eq.converged
-        & (jnp.linalg.norm(res_p) <= tol)
-        & (jnp.linalg.norm(res_r) <= tol)
-        & jnp.all(jnp.isfinite(qc))
-    )
-    cond = condition_number(J)
-    lim = robot.joint_limits.astype(dtype)
-    within = jnp.all((qc >= lim[:, 0] - 1e-12) & (qc <= lim[:, 1] + 1e-12))
+    residual = jax.lax.stop_gradient(pose_error(p_t, R_t, p_c, R_c))
     res_cov = jnp.full((3, 3), jnp.nan, dtype)
     if covariance is not None:
         if jnp.shape(covariance) != (len(table), len(table)):
@@ -143,13 +133,20 @@ def compensate_tree_row(
                 f"table), got {jnp.shape(covariance)}"
             )
         res_cov = _residual_covariance(robot, table, q, qc, force, moment, i, target, covariance)
-    res_std = jnp.sqrt(jnp.maximum(jnp.trace(res_cov), 0.0))
-    # One reason per row, the most basic cause last (it wins), as `compensate_row`.
-    result = RESULTS.where(within, RESULTS.successful, RESULTS.joint_limits)
-    result = RESULTS.where(solved & verified, result, RESULTS.out_of_reach)
-    result = RESULTS.where(cond > max_cond, RESULTS.singular, result)
-    result = RESULTS.where(free.converged & loaded.converged, result, RESULTS.equilibrium_failed)
-    return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
+    return row_outcome(
+        qc,
+        J,
+        solved,
+        deflection,
+        rotation,
+        residual,
+        eq.converged,
+        free.converged & loaded.converged,
+        robot.joint_limits,
+        res_cov,
+        max_cond=max_cond,
+        tol=tol,
+    )
 
 
 def _residual_covariance(robot, table, q, qc, force, moment, at, target, covariance):
