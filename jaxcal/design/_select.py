@@ -20,7 +20,8 @@ better result kept:
 - the rounded approximate design: the k rows of largest weight in the pool's
   approximate optimum (the multiplicative algorithm below, 50 steps).
 
-Every candidate swap is evaluated exactly, batched over the pool (host-side numpy,
+Every candidate swap is evaluated exactly, all pairs at once from the current `M⁻¹`
+(`swap_values`: the removal and the addition as two rank-r updates; host-side numpy,
 `p` ≲ 200): an exact k-subset, not a rounded approximate design.
 
 **Priors.** `prior` `(p,)` adds a Gaussian prior's information `diag(prior)` (`1/std²`
@@ -47,6 +48,7 @@ __all__ = [
     "select_rows",
     "pool_bound",
     "subset_values",
+    "swap_values",
 ]
 
 SELECT_CRITERIA: tuple[str, ...] = ("det", "trace", "task")
@@ -233,35 +235,84 @@ def _exchange(A, info, P0, ridge, chosen, criterion: str, W, tol: float, max_exc
     n = len(A)
     chosen = list(chosen)
     M = P0 + info[chosen].sum(0)
-    full0 = _inverse(M + ridge)
-    assert full0 is not None
-    value = start_value = _value(full0, criterion, W)
+    full = _inverse(M + ridge)
+    assert full is not None
+    value = start_value = _value(full, criterion, W)
     exchanges = 0
     for _ in range(max_exchanges):
         free = np.setdiff1d(np.arange(n), chosen)
         if free.size == 0:
             break
-        best = (value, -1, -1)
-        for a, i in enumerate(chosen):
-            base = _inverse(M - info[i] + ridge)
-            if base is None:  # round-off of the downdate
-                continue
-            v = _with_rows(base, criterion, W, A[free])
-            j = int(np.argmin(v))
-            if v[j] < best[0]:
-                best = (float(v[j]), a, int(free[j]))
-        gain = value - best[0]
+        v = swap_values(full, A, chosen, free, criterion, W)
+        for a in np.flatnonzero(np.isnan(v[:, 0])):
+            base = _inverse(M - info[chosen[a]] + ridge)
+            if base is not None:  # else round-off of the downdate: no swap of this row
+                v[a] = _with_rows(base, criterion, W, A[free])
+        a, j = np.unravel_index(int(np.nanargmin(v)), v.shape)
+        gain = value - float(v[a, j])
         # det is a logarithm: an absolute gain; trace and task: relative to the value.
-        if best[1] < 0 or not gain > tol * (1.0 if criterion == "det" else abs(value)):
+        if not gain > tol * (1.0 if criterion == "det" else abs(value)):
             break
-        _, a, j = best
+        j = int(free[j])
         M = M - info[chosen[a]] + info[j]
         chosen[a] = j
         exchanges += 1
         again = _inverse(M + ridge)
         assert again is not None
-        value = _value(again, criterion, W)  # afresh: no drift of the updates
+        full, value = again, _value(again, criterion, W)  # afresh: no drift of the updates
     return chosen, value, start_value, exchanges
+
+
+# A chosen row whose removal leaves less than this share of some direction's information
+# (an eigenvalue of `I − A_i M⁻¹ A_iᵀ`) is swapped by the direct formula of `_with_rows`
+# from its own downdated inverse, not by the downdate's rank-r correction.
+_FRAGILE = 1e-6
+
+
+def swap_values(full, A, chosen, free, criterion: str, W) -> np.ndarray:
+    """The criterion after swapping chosen row `chosen[a]` for pool row `free[b]`, for
+    every pair `(a, b)`: `(k, m)`, NaN for the rows whose removal is fragile (`_FRAGILE`).
+
+    From the current `M⁻¹` alone (Woodbury twice): removing row `i` leaves
+    `M_i⁻¹ = M⁻¹ + G_iᵀ D_i⁻¹ G_i` with `G = A M⁻¹`, `D_i = I − A_i M⁻¹ A_iᵀ`, so every
+    quantity of the swap is an `r × r` block of `A M⁻¹ Aᵀ` and `G W Gᵀ`: one product of
+    the pool's rows against the chosen ones per exchange, not one `(n r) × p × p`
+    product per chosen row."""
+    Minv, logdet = full
+    k, m, (_, r, p) = len(chosen), len(free), A.shape
+    Ac, Af = A[chosen].reshape(k * r, p), A[free].reshape(m * r, p)
+    Gc, Gf = Ac @ Minv, Af @ Minv
+
+    def blocks(X, Y, x, y):  # (x r, p) · (y r, p)ᵀ as (x, y, r, r) blocks
+        return (X @ Y.T).reshape(x, r, y, r).transpose(0, 2, 1, 3)
+
+    def diag(X, Y, x):  # the diagonal r × r blocks of X Yᵀ: (x, r, r)
+        return np.einsum("xrp,xsp->xrs", X.reshape(x, r, p), Y.reshape(x, r, p))
+
+    D = np.eye(r) - diag(Gc, Ac, k)
+    fragile = np.linalg.eigvalsh(D)[:, 0] < _FRAGILE
+    D[fragile] = np.eye(r)
+    Cfc = blocks(Af, Gc, m, k).transpose(1, 0, 2, 3)  # (k, m, r, r): A_j M⁻¹ A_iᵀ
+    K = np.swapaxes(np.linalg.solve(D[:, None], np.swapaxes(Cfc, -1, -2)), -1, -2)  # C D⁻¹
+    S = np.eye(r) + diag(Gf, Af, m)[None] + K @ np.swapaxes(Cfc, -1, -2)
+    if criterion == "det":
+        removed = logdet - np.linalg.slogdet(D)[1]
+        v = removed[:, None] - np.linalg.slogdet(S)[1]
+    else:
+        GWc, GWf = Gc @ W, Gf @ W
+        Hcc = diag(GWc, Gc, k)  # G_i W G_iᵀ
+        Hfc = blocks(GWf, Gc, m, k).transpose(1, 0, 2, 3)  # G_j W G_iᵀ
+        KH = K @ np.swapaxes(Hfc, -1, -2)
+        T = (
+            diag(GWf, Gf, m)[None]
+            + KH
+            + np.swapaxes(KH, -1, -2)
+            + K @ Hcc[:, None] @ (np.swapaxes(K, -1, -2))
+        )
+        removed = float(np.sum(Minv * W)) + np.trace(np.linalg.solve(D, Hcc), axis1=1, axis2=2)
+        v = removed[:, None] - np.trace(np.linalg.solve(S, T), axis1=2, axis2=3)
+    v[fragile] = np.nan
+    return v
 
 
 def _approximate(A, criterion: str, W, steps: int, fixed=None):
@@ -273,18 +324,21 @@ def _approximate(A, criterion: str, W, steps: int, fixed=None):
     w = np.full(n, 1.0 / n)
     fixed = np.zeros((p, p)) if fixed is None else fixed
     phi, d = None, np.zeros(n)
+    flat = A.reshape(-1, p)
     for _ in range(steps):
-        inv = _inverse(fixed + np.einsum("n,nrp,nrq->pq", w, A, A))
+        # As matrix products of the stacked rows (BLAS), not as einsums over (n, r, p).
+        Aw = flat * np.repeat(np.sqrt(w), A.shape[1])[:, None]
+        inv = _inverse(fixed + Aw.T @ Aw)
         if inv is None:
             return w, None, d
         Minv, logdet = inv
-        B = A @ Minv  # (n, r, p)
+        B = flat @ Minv  # (n r, p)
         if criterion == "det":
-            phi, d = logdet, np.einsum("nrp,nrp->n", B, A)
+            phi, d = logdet, np.sum(B * flat, axis=1).reshape(n, -1).sum(1)
             w = w * d
         else:
             phi = float(np.sum(Minv * W))
-            d = np.einsum("nrp,pq,nrq->n", B, W, B, optimize=True)
+            d = np.sum((B @ W) * B, axis=1).reshape(n, -1).sum(1)
             w = w * np.sqrt(d)
         w = w / w.sum()
     return w, phi, d
