@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._keys import check_keys
+from ._model.robot_files import TREE_PRESETS
 from ._ranges import check_robot_values
 from ._robot import BODIES, GEOMETRY_KEYS, URAD, Experiment, G, Robot
 
@@ -265,6 +266,8 @@ def load_robot_dict(robot: str | Path) -> tuple[dict, str]:
     if s in PRESETS:
         text = resources.files("jaxcal.robots").joinpath(f"{s}.json").read_text()
         return json.loads(text), f"preset {s}"
+    if s in TREE_PRESETS or s.lower().endswith(".urdf"):
+        _not_this_form(s)
     path = Path(s)
     if not path.exists():
         raise ValueError(
@@ -279,9 +282,21 @@ def load_robot_dict(robot: str | Path) -> tuple[dict, str]:
     except OSError as e:
         raise ValueError(f"{path}: cannot read: {e.strerror}") from None
     try:
-        return json.loads(text), str(path)
+        d = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON: {e}") from None
+    if isinstance(d, dict) and d.get("kind") in ("tree", "urdf"):
+        _not_this_form(s)
+    return d, str(path)
+
+
+def _not_this_form(s: str):
+    raise ValueError(
+        f"robot {s!r} is given as a kinematic tree, and this takes a robot of the FANUC "
+        "form (six joints, a parallelogram, a compensator on joint 2). A tree robot is "
+        "read by jaxcal.load_tree; on the command line identify, validate, simulate, "
+        "discover, compensate and design --pool take it"
+    )
 
 
 def load_robot(robot: str | Path | Robot = "fanuc_m900ib700") -> Robot:

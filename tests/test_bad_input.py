@@ -294,3 +294,22 @@ def test_gross_error_cli_says_so(example, tmp_path, capsys):
     assert 20 not in d["outliers"] and d["outliers"] == []
     rc, _, err = run(["identify", bad, "--keep-outliers", "--no-advice"], capsys)
     assert "row 20" in err and "the estimates include it and are not to be trusted" in err
+
+
+@pytest.mark.parametrize("robot", ["dlr_agile_justin", "tree_file"])
+@pytest.mark.parametrize("command", ["montecarlo", "design", "evaluate"])
+def test_a_tree_robot_where_the_fanuc_form_is_needed_is_named(
+    command, robot, example, tmp_path, capsys
+):
+    # The commands without a tree form say so, for a tree preset and a tree robot file
+    # alike, and name those that take one; in Python, `load_robot` says the same.
+    if robot == "tree_file":
+        robot = tmp_path / "t.json"
+        robot.write_text(json.dumps(jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))))
+    args = [command, *([] if command == "design" else [example]), "--robot", robot]
+    rc, out, err = run(args, capsys)
+    assert rc == 2 and out == ""
+    assert f"jaxcal {command}: error: robot '{robot}' is given as a kinematic tree" in err
+    assert "design --pool take it" in err
+    with pytest.raises(ValueError, match="is given as a kinematic tree"):
+        jaxcal.load_robot(robot)
