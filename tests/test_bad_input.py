@@ -297,7 +297,7 @@ def test_gross_error_cli_says_so(example, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("robot", ["dlr_agile_justin", "tree_file"])
-@pytest.mark.parametrize("command", ["montecarlo", "design", "evaluate"])
+@pytest.mark.parametrize("command", ["montecarlo", "design"])
 def test_a_tree_robot_where_the_fanuc_form_is_needed_is_named(
     command, robot, example, tmp_path, capsys
 ):

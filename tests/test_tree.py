@@ -436,6 +436,48 @@ def test_rows_selected_for_a_task_with_priors(justin, data):
     assert sel.value == pytest.approx(np.trace(np.linalg.solve(info, W)), rel=1e-6)
 
 
+def test_a_plans_predicted_std_is_the_std_its_calibration_reports(simulated):
+    # Judged at the calibrated robot, the measured plan predicts the std the calibration
+    # reports (the same linearisation, computed apart), for the same fitted parameters.
+    # The bound over the plan's poses and as many drawn within the joint limits is below
+    # the plan's trace.
+    _, sim, groups, cal = simulated
+    ev = jaxcal.evaluate_tree_plan(cal.robot, sim, groups=groups, bound_pool=BLOCK)
+    np.testing.assert_array_equal(ev.fitted, cal.fitted)
+    assert ev.not_fitted == cal.held and ev.rows == BLOCK
+    np.testing.assert_allclose(ev.std[ev.fitted], cal.std[cal.fitted], rtol=1e-6)
+    assert ev.bound is not None and 0 < ev.bound <= ev.trace
+    assert ev.efficiency == pytest.approx(ev.bound / ev.trace)
+
+
+def test_cli_evaluates_chosen_rows_as_their_selection_predicted(data, tmp_path, capsys):
+    # The rows chosen for a task, written as a plan and judged by `evaluate`: the task
+    # error the selection's exchange predicted, from the plan's own covariance.
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    groups, priors = ("frames", "joint-compliance"), {"joint-compliance": PRIOR}
+    pool, task = data.subset(np.arange(BLOCK)), data.subset(np.arange(BLOCK, 2 * BLOCK))
+    out = jaxcal.select_tree_rows(
+        robot, pool, 20, criterion="task", groups=groups, priors=priors, task=task
+    )
+    files = {"plan": pool.subset(out.selection.rows), "task": task}
+    for name, part in files.items():
+        jaxcal.write_markers(tmp_path / f"{name}.csv", part, robot, part.markers)
+    args = ["evaluate", str(tmp_path / "plan.csv"), "--robot", "dlr_agile_justin"]
+    args += ["--params", "frames,joint-compliance", "--prior", f"joint-compliance={PRIOR}"]
+    args += ["--task", str(tmp_path / "task.csv")]
+    assert main([*args, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["task_rms_mm"] == pytest.approx(1e3 * np.sqrt(out.selection.value), rel=1e-8)
+    assert d["rows"] == 20 and d["priors"] == priors and d["bound"] is None
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert f"after calibration: {d['task_rms_mm']:.4g} mm" in text
+    assert "Gaussian priors, centred on the robot file's values: joint-compliance ± " in text
+    # The FANUC form's options are refused by name.
+    assert main([*args, "--absolute"]) == 2
+    assert "--absolute: for the FANUC form" in capsys.readouterr().err
+
+
 def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
     # The pool and task of the test above, as files: the same selection, written out.
     robot = jaxcal.load_tree("dlr_agile_justin")

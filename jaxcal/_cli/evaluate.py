@@ -1,7 +1,8 @@
 """`jaxcal evaluate`: every design criterion and each parameter's predicted standard
 error for the poses and loads of a data file, its efficiency against the bound, and
 optionally the task error it predicts (`--task`) and the std from absolute measurements
-of the same poses (`--absolute`). The standard-error table is shared with `design`."""
+of the same poses (`--absolute`). The standard-error table is shared with `design`. A
+tree robot's plan goes to `evaluate_tree.py`."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import sys
 import numpy as np
 
 from .._format import format_table
-from .main import add_robot_argument, print_json
+from .main import add_prior_argument, add_robot_argument, print_json
 
 
 def register(sub) -> None:
@@ -64,6 +65,17 @@ def register(sub) -> None:
         "compensate path format); prints the RMS tool-point error the calibrated model "
         "will leave on it (mm), from the physical parameters' predicted covariance",
     )
+    e.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="robots given as a kinematic tree: the calibration's parameter groups (as "
+        "identify; default: the full calibration). A tree robot's plan is an "
+        "absolute-measurement file (its marker values unused); --task then takes poses whose "
+        "markers the calibrated model will predict, and the bound draws --bound-pool poses "
+        "within the joint limits",
+    )
+    add_prior_argument(e)
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=run_evaluate)
 
@@ -133,6 +145,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from .._io import read_dataset
+    from .._model.robot_files import is_tree_file
     from .._plausibility import merged_q2_levels
     from .._robot_file import load_robot
     from ..design._bound import design_bound
@@ -140,6 +153,15 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from ..design._criteria import design_criteria
     from ..design._parameter_sets import default_relative, resolve_parameters
 
+    if is_tree_file(args.robot):
+        from .evaluate_tree import evaluate_tree
+
+        return evaluate_tree(args)
+    if args.params or args.prior:
+        raise ValueError(
+            "--params and --prior judge a plan for a robot given as a kinematic tree "
+            "(absolute marker data)"
+        )
     robot = load_robot(args.robot)
     data = read_dataset(args.design, robot, require_deflection=False, ignore_deflection=True)
     moment = data.moment if data.has_moments else None

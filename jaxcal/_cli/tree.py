@@ -199,7 +199,7 @@ def identify_tree(args: argparse.Namespace) -> int:
 _HEAD = ["parameter", "group", "estimate", "std", "95% low", "95% high", "unit"]
 
 
-def priors_line(priors: dict, table) -> str:
+def priors_line(priors: dict, table, *, fitted: bool = True) -> str:
     def units(key):
         found = dict.fromkeys(p.unit for p in table if key in (p.name, p.group))
         return "/".join(found) or "its unit"
@@ -207,6 +207,11 @@ def priors_line(priors: dict, table) -> str:
     said = "; ".join(
         f"{k} ± {v}" if isinstance(v, str) else f"{k} ± {v:g} {units(k)}" for k, v in priors.items()
     )
+    if not fitted:  # a plan's prediction: no estimates, no chi2
+        return (
+            f"Gaussian priors, centred on the robot file's values: {said}. The std are "
+            "posterior ones (a parameter the plan does not see keeps its prior std)."
+        )
     return (
         f"Gaussian priors, centred on the robot file's values: {said}. Estimates and std of "
         "the parameters with a prior are posterior ones (a parameter the data do not see "

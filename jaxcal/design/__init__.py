@@ -27,6 +27,10 @@ from ._criteria import (
     design_criteria as design_criteria,
     design_observation as design_observation,
 )
+from ._evaluate_tree import (
+    TreePlanEvaluation as TreePlanEvaluation,
+    evaluate_tree_plan as evaluate_tree_plan,
+)
 from ._optimise import (
     Design as Design,
     DesignProblem as DesignProblem,

@@ -24,6 +24,7 @@ import numpy as np
 
 from .._identification.elastogeometric import observations, scaled_jacobian
 from .._identification.parameter_groups import (
+    Parameter,
     PriorSpec,
     default_groups,
     parameter_table,
@@ -35,10 +36,10 @@ from .._model.tree import TreeRobot
 from ._select import SELECT_CRITERIA, pool_bound, select_rows, subset_values
 from ._select_pool import PoolSelection, selection_efficiency
 
-__all__ = ["select_tree_rows"]
+__all__ = ["row_blocks", "select_tree_rows", "task_weight"]
 
 
-def _row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
+def row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
     """`(n, 3K, P)`: each row's seen marker coordinates' Jacobian rows, zero for a
     marker not seen (a zero row carries no information)."""
     rows, markers = observations(data)
@@ -46,6 +47,18 @@ def _row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
     out = np.zeros((n, K, 3, J.shape[-1]))
     out[rows, markers] = J
     return out.reshape(n, 3 * K, -1)
+
+
+def task_weight(
+    robot: TreeRobot, table: tuple[Parameter, ...], cols: np.ndarray, task: MarkerData
+) -> np.ndarray:
+    """The task's `W` `(p, p)` in the parameters `cols` of `table`: the mean over the
+    task rows' seen markers of `JᵀJ`, `J` the 3-D marker position's Jacobian (m per
+    typical size), so that `trace(C W)` is the mean square marker error (m²)."""
+    # The task's rows as they are (poses, loads, kind), unit σ, no measurements.
+    unit = dataclasses.replace(task, markers=None, sigma=np.ones(len(task.q)))
+    Jt = scaled_jacobian(robot, table, unit)[:, :, cols]  # m per typical size
+    return np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
 
 
 def select_tree_rows(
@@ -80,16 +93,13 @@ def select_tree_rows(
     has_prior = np.isfinite(std)
     J = scaled_jacobian(robot, table, pool)  # (m, 3, P): σ-weighted, typical-size units
     cols = fitted_parameters(J.reshape(-1, len(table)), np.ones(len(table), bool), has_prior)
-    obs = _row_blocks(J, pool)[:, :, cols]
+    obs = row_blocks(J, pool)[:, :, cols]
     scale = np.array([p.scale for p in table])
     prior = np.where(has_prior, (scale / np.where(has_prior, std, 1.0)) ** 2, 0.0)[cols]
     W = None
     if criterion == "task":
         assert task is not None
-        # The task's rows as they are (poses, loads, kind), unit σ, no measurements.
-        unit = dataclasses.replace(task, markers=None, sigma=np.ones(len(task.q)))
-        Jt = scaled_jacobian(robot, table, unit)[:, :, cols]  # m per typical size
-        W = np.einsum("mrp,mrq->pq", Jt, Jt) / Jt.shape[0]
+        W = task_weight(robot, table, cols, task)
     ones = np.ones(len(pool.q))  # obs is already σ-weighted
     sel = select_rows(obs, ones, k, criterion=criterion, weight=W, prior=prior)
     rng = np.random.default_rng(seed)
