@@ -247,11 +247,13 @@ from .discrepancy import (
 )
 from .montecarlo import (
     MonteCarloResult as MonteCarloResult,
+    TreeStudy as TreeStudy,
     load_sweep as load_sweep,
     monte_carlo as monte_carlo,
     noise_sweep as noise_sweep,
     plot_error_vs_noise as plot_error_vs_noise,
     plot_histograms as plot_histograms,
+    tree_study as tree_study,
     trial_noise as trial_noise,
 )
 

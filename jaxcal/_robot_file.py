@@ -295,7 +295,7 @@ def _not_this_form(s: str):
         f"robot {s!r} is given as a kinematic tree, and this takes a robot of the FANUC "
         "form (six joints, a parallelogram, a compensator on joint 2). A tree robot is "
         "read by jaxcal.load_tree; on the command line identify, validate, simulate, "
-        "discover, compensate, evaluate and design --pool take it"
+        "discover, compensate, evaluate, montecarlo and design --pool take it"
     )
 
 

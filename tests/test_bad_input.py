@@ -297,12 +297,10 @@ def test_gross_error_cli_says_so(example, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("robot", ["dlr_agile_justin", "tree_file"])
-@pytest.mark.parametrize("command", ["montecarlo", "design"])
-def test_a_tree_robot_where_the_fanuc_form_is_needed_is_named(
-    command, robot, example, tmp_path, capsys
-):
-    # The commands without a tree form say so, for a tree preset and a tree robot file
-    # alike, and name those that take one; in Python, `load_robot` says the same.
+def test_a_tree_robot_where_the_fanuc_form_is_needed_is_named(robot, example, tmp_path, capsys):
+    # The continuous design has no tree form and says so, for a tree preset and a tree
+    # robot file alike, naming the commands that take one; `load_robot` says the same.
+    command = "design"
     if robot == "tree_file":
         robot = tmp_path / "t.json"
         robot.write_text(json.dumps(jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))))

@@ -8,7 +8,14 @@ import os
 import sys
 
 from .._identification.identify import METHODS
-from .main import add_fix_argument, add_robot_argument, fix_names, print_json, seed
+from .main import (
+    add_fix_argument,
+    add_prior_argument,
+    add_robot_argument,
+    fix_names,
+    print_json,
+    seed,
+)
 
 
 def register(sub) -> None:
@@ -66,6 +73,17 @@ def register(sub) -> None:
         help="run the study as N processes of one jax.distributed job on this machine "
         "(trials sharded over all of them; same numbers as one process)",
     )
+    p.add_argument(
+        "--params",
+        default=None,
+        metavar="GROUPS",
+        help="robots given as a kinematic tree: the calibration's parameter groups (as "
+        "identify). The robot is the truth; DESIGN.csv is an absolute-measurement (or "
+        "deflection) file whose poses, seen markers and sigma_mm are used; --method linear "
+        "(the linearised model, every trial at once) or nonlinear (a full calibration per "
+        "trial)",
+    )
+    add_prior_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
@@ -75,10 +93,19 @@ def run(args: argparse.Namespace) -> int:
 
     from .._identification.result import resolve_name
     from .._io import read_dataset
+    from .._model.robot_files import is_tree_file
     from .._robot_file import load_robot
     from ..montecarlo._processes import join_processes, run_local_processes
     from ..montecarlo._study import monte_carlo
 
+    if is_tree_file(args.robot):
+        from .montecarlo_tree import montecarlo_tree
+
+        return montecarlo_tree(args)
+    if args.params or args.prior:
+        raise ValueError(
+            "--params and --prior are for a robot given as a kinematic tree (absolute marker data)"
+        )
     if args.processes < 1:
         raise ValueError(f"--processes must be at least 1, got {args.processes}")
     if args.processes > 1 and "JAXCAL_COORDINATOR" not in os.environ:

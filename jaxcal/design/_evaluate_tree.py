@@ -20,6 +20,7 @@ the data's information alone, and a deflection plan's loads are the user's: no b
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,7 +40,7 @@ from .._model.tree import TreeRobot
 from ._select import pool_bound
 from ._select_tree import row_blocks, task_weight
 
-__all__ = ["TreePlanEvaluation", "evaluate_tree_plan"]
+__all__ = ["LinearisedPlan", "TreePlanEvaluation", "evaluate_tree_plan", "linearised_plan"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,6 +127,43 @@ class TreePlanEvaluation:
         }
 
 
+class LinearisedPlan(NamedTuple):
+    """A plan's calibration linearised at a robot: `table` and `fitted` `(P,)` (as
+    `calibrate_tree` would choose), `J` `(m, 3, P)` the σ-weighted marker Jacobian of the
+    plan's seen markers in units of the parameters' typical sizes `scale` `(P,)`, `A`
+    `(3m, p)` its fitted columns, `information` `(p, p)` = `AᵀA` plus the priors', and
+    `prior_std` `(P,)` SI (`inf`: none)."""
+
+    table: tuple[Parameter, ...]
+    fitted: np.ndarray
+    J: np.ndarray
+    A: np.ndarray
+    information: np.ndarray
+    scale: np.ndarray
+    prior_std: np.ndarray
+
+
+def linearised_plan(
+    robot: TreeRobot,
+    plan: MarkerData,
+    groups: tuple[str, ...] | None = None,
+    priors: dict[str, PriorSpec] | None = None,
+) -> LinearisedPlan:
+    """Host-side: the calibration of `groups` (default `default_groups(robot)`) with
+    `priors` on the rows of `plan`, linearised at `robot`'s values."""
+    groups = default_groups(robot, plan.deflection) if groups is None else groups
+    table = parameter_table(robot, groups)
+    P = len(table)
+    prior = prior_stds(robot, table, priors)
+    has_prior = np.isfinite(prior)
+    J = scaled_jacobian(robot, table, plan)  # (m, 3, P): σ-weighted, typical-size units
+    cols = fitted_parameters(J.reshape(-1, P), np.ones(P, bool), has_prior)
+    scale = np.array([p.scale for p in table])
+    info = np.where(has_prior, (scale / np.where(has_prior, prior, 1.0)) ** 2, 0.0)[cols]
+    A = J.reshape(-1, P)[:, cols]
+    return LinearisedPlan(table, cols, J, A, A.T @ A + np.diag(info), scale, prior)
+
+
 def evaluate_tree_plan(
     robot: TreeRobot,
     plan: MarkerData,
@@ -147,19 +185,10 @@ def evaluate_tree_plan(
         raise ValueError(f"threshold must be positive, got {threshold}")
     if bound_pool < 0:
         raise ValueError(f"bound_pool must be ≥ 0, got {bound_pool}")
-    groups = default_groups(robot, plan.deflection) if groups is None else groups
-    table = parameter_table(robot, groups)
-    P = len(table)
-    prior = prior_stds(robot, table, priors)
-    has_prior = np.isfinite(prior)
-    J = scaled_jacobian(robot, table, plan)  # (m, 3, P): σ-weighted, typical-size units
-    cols = fitted_parameters(J.reshape(-1, P), np.ones(P, bool), has_prior)
-    scale = np.array([p.scale for p in table])
-    info = np.where(has_prior, (scale / np.where(has_prior, prior, 1.0)) ** 2, 0.0)[cols]
-    A = J.reshape(-1, P)[:, cols]
-    # The fit's information; its Cholesky factor gives the covariance and its log det.
-    L = np.linalg.cholesky(A.T @ A + np.diag(info))
-    Linv = np.linalg.solve(L, np.eye(len(info)))
+    lin = linearised_plan(robot, plan, groups, priors)
+    table, cols, scale, P = lin.table, lin.fitted, lin.scale, len(lin.table)
+    L = np.linalg.cholesky(lin.information)
+    Linv = np.linalg.solve(L, np.eye(L.shape[0]))
     C = Linv.T @ Linv
     std = np.full(P, np.nan)
     std[cols] = np.sqrt(np.diagonal(C)) * scale[cols]
@@ -169,7 +198,7 @@ def evaluate_tree_plan(
         W = task_weight(robot, table, cols, task)
         rms = float(np.sqrt(max(float(np.sum(C * W)), 0.0)) * 1e3)
     bound, eff, note = None, None, ""
-    if has_prior.any():
+    if np.isfinite(lin.prior_std).any():
         note = "no bound with priors (it holds for the data's information alone)"
     elif plan.deflection or plan.force is not None or plan.moment is not None:
         note = "no bound for a plan with loads (their choice is the user's)"
@@ -178,7 +207,7 @@ def evaluate_tree_plan(
     else:
         extra = random_plan(robot, bound_pool, float(np.median(plan.sigma)), seed)
         obs = np.concatenate(
-            [row_blocks(J, plan), row_blocks(scaled_jacobian(robot, table, extra), extra)]
+            [row_blocks(lin.J, plan), row_blocks(scaled_jacobian(robot, table, extra), extra)]
         )[:, :, cols]
         bound = pool_bound(obs, np.ones(len(obs)), len(plan.q), criterion="trace")
         eff = bound / trace
@@ -188,7 +217,7 @@ def evaluate_tree_plan(
         fitted=cols,
         nominal=np.asarray(get_vector(robot, table)),
         std=std,
-        prior_std=prior,
+        prior_std=lin.prior_std,
         trace=trace,
         logdet=-2.0 * float(np.sum(np.log(np.diagonal(L)))),
         task_rms_mm=rms,

@@ -21,3 +21,8 @@ from ._sweeps import (
     load_sweep as load_sweep,
     noise_sweep as noise_sweep,
 )
+from ._tree import (
+    TREE_METHODS as TREE_METHODS,
+    TreeStudy as TreeStudy,
+    tree_study as tree_study,
+)

@@ -1,0 +1,75 @@
+"""`jaxcal montecarlo PLAN.csv --robot TREE`: a Monte-Carlo noise study of a tree robot's
+measurement plan (`tree_study`), its statistics per parameter as a table or JSON."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .._format import format_table
+from .main import print_json, priors_of
+from .tree import priors_line, tree_robot
+
+_HEAD = ["parameter", "unit", "true", "mean", "bias", "std", "rmse", "predicted std", "cover95 %"]
+
+
+def montecarlo_tree(args: argparse.Namespace) -> int:
+    from .._identification.parameter_groups import parse_groups
+    from .._markers import read_markers
+    from ..montecarlo._tree import TREE_METHODS, tree_study
+
+    for flag, given in (
+        ("--processes", args.processes != 1),
+        ("--student-t", args.student_t is not None),
+        ("--chunk", args.chunk is not None),
+        ("--fix", bool(args.fix)),
+    ):
+        if given:
+            raise ValueError(
+                f"{flag}: for the FANUC form; a tree robot's study takes --params GROUPS "
+                "and --prior (as identify)"
+            )
+    if args.method not in TREE_METHODS:
+        raise ValueError(
+            f"--method {args.method}: a tree robot's study is {' or '.join(TREE_METHODS)}"
+        )
+    robot = tree_robot(args)
+    plan = read_markers(args.design, robot, require_markers=False)
+    priors = priors_of(args)
+    show = not args.no_progress and not args.json and sys.stderr.isatty()
+
+    def progress(done: int, total: int) -> None:
+        end = "\n" if done == total else ""
+        print(f"\rtrial {done}/{total}", end=end, file=sys.stderr, flush=True)
+
+    st = tree_study(
+        robot,
+        plan,
+        args.trials,
+        groups=parse_groups(args.params, robot, plan.deflection),
+        priors=priors,
+        method=args.method,
+        noise_mm=args.noise_mm,
+        seed=args.seed,
+        progress=progress if show else None,
+    )
+    d = {"robot": robot.name, "plan": args.design, "seed": args.seed, "priors": priors}
+    d.update(st.to_dict())
+    if args.json:
+        print_json(d)
+        return 0
+    print(
+        f"{st.method} calibration of {robot.name}, {d['trials']} trials ({d['failed']} failed), "
+        f"noise {d['noise_mm']:g} mm (median σ of the rows), seed {args.seed}, {st.seconds:.3g} s"
+    )
+    rows = [
+        [p["name"], p["unit"], p["truth"], p["mean"], p["bias"], p["std"], p["rmse"]]
+        + [p["predicted_std"], 100 * p["coverage95"]]
+        for p in d["parameters"]
+    ]
+    print(format_table(_HEAD, rows))
+    if d["not_fitted"]:
+        print(f"not determined by the plan, held: {', '.join(d['not_fitted'])}")
+    if priors:
+        print(priors_line(priors, st.table, fitted=False))
+    return 0
