@@ -235,7 +235,8 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
         text = "\n  ".join(problems[:_MAX_REPORTED])
         tail = f"\n  ... and {more} more" if more > 0 else ""
         raise DataError(f"{path}: {len(problems)} problem(s):\n  {text}{tail}")
-    seen = np.all(np.isfinite(y), axis=-1)
+    # A file of poses alone is a plan: every marker is to be measured at each pose.
+    seen = np.all(np.isfinite(y), axis=-1) if present else np.ones((n, k), bool)
     if require_markers and not seen.any():
         raise DataError(f"{path}: no marker was seen in any row")
     return MarkerData(
@@ -251,14 +252,21 @@ def read_markers(path: str | Path, robot: TreeRobot, *, require_markers: bool = 
     )
 
 
-def write_markers(path: str | Path | TextIO, data: MarkerData, robot: TreeRobot, markers) -> None:
+def write_markers(
+    path: str | Path | TextIO, data: MarkerData, robot: TreeRobot, markers=None
+) -> None:
     """Write `data`'s poses with `markers` `(n, k, 3)` (m; NaN: not written) as an
     absolute-measurement CSV (a deflection file, `dx_mm ..` of the first marker, for
     deflection data), to a path (atomically: a failure leaves any old file as it was) or
-    an open text stream."""
+    an open text stream; `markers` `None`: a plan, the poses without marker columns
+    (read back, every marker is to be measured)."""
     qcols, mcols = marker_columns(robot)
-    y = np.asarray(markers) * 1e3
-    if data.deflection:
+    n = len(data)
+    if markers is None:
+        mcols, y = (), np.zeros((n, 0))
+    else:
+        y = np.asarray(markers) * 1e3
+    if data.deflection and markers is not None:
         mcols, y = D_COLS, y[:, :1]
     unit = joint_units(robot)
     with contextlib.ExitStack() as stack:

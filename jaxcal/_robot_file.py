@@ -293,9 +293,8 @@ def load_robot_dict(robot: str | Path) -> tuple[dict, str]:
 def _not_this_form(s: str):
     raise ValueError(
         f"robot {s!r} is given as a kinematic tree, and this takes a robot of the FANUC "
-        "form (six joints, a parallelogram, a compensator on joint 2). A tree robot is "
-        "read by jaxcal.load_tree; on the command line identify, validate, simulate, "
-        "discover, compensate, evaluate, montecarlo and design --pool take it"
+        "form (six joints, a parallelogram, a compensator on joint 2): read it with "
+        "jaxcal.load_tree (the command line takes either form)"
     )
 
 

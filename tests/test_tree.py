@@ -478,6 +478,25 @@ def test_cli_evaluates_chosen_rows_as_their_selection_predicted(data, tmp_path, 
     assert "--absolute: for the FANUC form" in capsys.readouterr().err
 
 
+def test_cli_designs_poses_and_evaluate_reads_them_back(tmp_path, capsys):
+    # `design --robot TREE`: K of N candidate poses drawn within the joint limits, written
+    # as a plan (poses only: every marker to be measured); `evaluate` of that file states
+    # the same criterion, and both an efficiency no better than their bound.
+    plan = tmp_path / "plan.csv"
+    args = ["--robot", "dlr_agile_justin", "--params", "frames,joint-compliance"]
+    args += ["--bound-pool", "150", "--json"]
+    assert main(["design", "--configs", "10", *args, "-o", str(plan)]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["candidates"] == 150 and len(d["rows"]) == 10 and d["full_rank"]
+    assert 0 < d["efficiency"] <= 1 and d["value"] < d["random_median"]
+    back = jaxcal.read_markers(plan, jaxcal.load_tree("dlr_agile_justin"), require_markers=False)
+    assert back.markers is None and back.seen.all() and len(back.q) == 10
+    assert main(["evaluate", str(plan), *args]) == 0
+    e = json.loads(capsys.readouterr().out)
+    assert e["trace"] == pytest.approx(d["value"], rel=1e-9)
+    assert 0 < e["efficiency"] <= 1
+
+
 def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
     # The pool and task of the test above, as files: the same selection, written out.
     robot = jaxcal.load_tree("dlr_agile_justin")

@@ -154,7 +154,7 @@ def register(sub) -> None:
         "--params",
         default=None,
         metavar="GROUPS",
-        help="with --pool and a tree robot: the calibration's parameter groups (as identify)",
+        help="a robot given as a kinematic tree: the calibration's parameter groups (as identify)",
     )
     p.add_argument(
         "--task",
@@ -169,7 +169,8 @@ def register(sub) -> None:
         default=2000,
         metavar="N",
         help="candidates of the approximate-design bound that the efficiency is stated "
-        "against (2000; 0: no bound)",
+        "against (2000; 0: no bound); for a robot given as a kinematic tree, the candidate "
+        "poses drawn within its joint limits that --configs are chosen from",
     )
     p.add_argument("-o", "--output", metavar="DESIGN.csv", default=None, help="write the design")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -190,6 +191,12 @@ def run_design(args: argparse.Namespace) -> int:
         from .select import run_select
 
         return run_select(args)
+    from .._model.robot_files import is_tree_file
+
+    if is_tree_file(args.robot):
+        from .select import design_tree
+
+        return design_tree(args)
     if args.select is not None:
         raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
     task = None

@@ -162,13 +162,9 @@ def run_tree(args: argparse.Namespace) -> int:
         _print(found, held)
 
     def write_poses(path):
-        import numpy as np
-
         from .._markers import write_markers
 
-        told = found.discrimination
-        blank = np.full((len(told.plan), len(robot.marker_names), 3), np.nan)
-        write_markers(path, told.plan, robot, blank)
+        write_markers(path, found.discrimination.plan, robot)
 
     return write_outputs(args, found.discrimination, write_poses, found.plot)
 

@@ -100,6 +100,58 @@ def _run_tree(args: argparse.Namespace) -> int:
     return _finish(args, out, d, write)
 
 
+def design_tree(args: argparse.Namespace) -> int:
+    """`jaxcal design --robot TREE`: `--configs K` poses for a tree robot's calibration,
+    the exact K-row subset of `--bound-pool` candidate poses drawn within its joint
+    limits (every marker seen, the robot's noise), by the exchange of `design --pool`."""
+    from .._identification.parameter_groups import parse_groups
+    from .._markers import random_plan, read_markers, write_markers
+    from ..design import select_tree_rows
+    from .tree import tree_robot
+
+    if args.criterion not in ("det", "trace", "task"):
+        raise ValueError(
+            f"--criterion {args.criterion}: a tree robot's poses are chosen by det, trace or task"
+        )
+    if args.criterion == "task" and not args.task:
+        raise ValueError("--criterion task needs --task TASK.csv")
+    if args.task and args.criterion != "task":
+        raise ValueError("--task TASK.csv goes with --criterion task")
+    if args.select is not None:
+        raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
+    k = 12 if args.configs is None else args.configs
+    if not 1 <= k <= args.bound_pool:
+        raise ValueError(
+            f"--configs must be in 1..{args.bound_pool} (the candidate poses, --bound-pool), "
+            f"got {k}"
+        )
+    robot = tree_robot(args)
+    pool = random_plan(robot, args.bound_pool, robot.noise_std, args.seed)
+    task = read_markers(args.task, robot, require_markers=False) if args.task else None
+    priors = priors_of(args)
+    out = select_tree_rows(
+        robot,
+        pool,
+        k,
+        criterion=args.criterion,
+        groups=parse_groups(args.params, robot, False),
+        priors=priors,
+        task=task,
+        seed=args.seed,
+    )
+    d = {**out.to_dict(), "priors": priors, "candidates": args.bound_pool}
+    for key in ("bound", "efficiency"):
+        d[key] = None if not np.isfinite(d[key]) else d[key]
+    args.select = k
+
+    def write(path: str) -> int:
+        chosen = pool.subset(out.selection.rows)
+        write_markers(path, chosen, robot)
+        return len(chosen)
+
+    return _finish(args, out, d, write)
+
+
 def _finish(args, out, d: dict, write) -> int:
     """Write the chosen rows (`write(path)` → their count) where `-o` says, print the
     report (table or `--json`), and say a failed write after it."""
@@ -129,7 +181,12 @@ def _report(args, out, d) -> None:
         if tree
         else f"parameters: {', '.join(n.split('_')[0] for n in out.names)}"
     )
-    print(f"{args.select} of {args.pool}'s rows for {crit} ({unit}), {said}")
+    source = (
+        f"{d['candidates']} poses drawn within the joint limits"
+        if "candidates" in d
+        else f"{args.pool}'s rows"
+    )
+    print(f"{args.select} of {source} for {crit} ({unit}), {said}")
     rows = [int(r) for r in d["rows"]]
     print(f"rows (1-based): {', '.join(map(str, rows))}")
     to_unit = 1e6 if crit == "task" else 1.0  # the task's m² printed in mm²
