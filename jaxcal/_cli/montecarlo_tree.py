@@ -60,7 +60,11 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
         return 0
     print(
         f"{st.method} calibration of {robot.name}, {d['trials']} trials ({d['failed']} failed), "
-        f"noise {d['noise_mm']:g} mm (median σ of the rows), seed {args.seed}, {st.seconds:.3g} s"
+        f"noise {d['noise_mm']:g} mm (median σ of the rows), seed {args.seed}"
+    )
+    print(
+        f"{st.seconds:.3g} s, of which {st.first_seconds:.3g} s until the first trial's "
+        "estimate (the linearisation and compilation)"
     )
     rows = [
         [p["name"], p["unit"], p["truth"], p["mean"], p["bias"], p["std"], p["rmse"]]
