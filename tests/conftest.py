@@ -56,7 +56,6 @@ _SLOWEST_FILES = {
     "test_urdf_export.py": 56,
     "test_identification.py": 45,
     "test_cli_identify.py": 36,
-    "test_select.py": 36,
     "test_bad_input.py": 24,
     "test_equilibrium.py": 23,
     "test_linalg_switch.py": 23,
@@ -65,7 +64,9 @@ _SLOWEST_FILES = {
     "test_urdf.py": 19,
     "test_no_lapack.py": 18,
     "test_undetermined.py": 17,
+    "test_montecarlo_tree.py": 17,
     "test_task.py": 13,
+    "test_select.py": 8,
 }
 
 # Each notebook runs in a kernel of its own, which reads the programs that the test
