@@ -82,6 +82,7 @@ def test_cli_study_of_a_tree_robot(tmp_path, data_dir, capsys):
     assert "a tree robot's study is linear or nonlinear" in capsys.readouterr().err
     fanuc = ["montecarlo", str(data_dir / "example_calibration.csv"), "--params", "frames"]
     assert main(fanuc) == 2
-    assert "--params and --prior are for a robot given as a kinematic tree" in (
-        capsys.readouterr().err
+    assert (
+        "--params and --prior set the study's calibration for a robot given as a kinematic tree"
+        in (capsys.readouterr().err)
     )

@@ -519,7 +519,7 @@ def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
     # A FANUC-form robot takes neither option.
     fanuc = ["design", "--pool", str(DATA.parent / "example_calibration.csv"), "--select", "5"]
     assert main([*fanuc, "--prior", "k2=1"]) == 2
-    assert "--prior and --params choose rows for a robot given as a kinematic tree" in (
+    assert "--params and --prior choose rows for a robot given as a kinematic tree" in (
         capsys.readouterr().err
     )
 

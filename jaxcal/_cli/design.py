@@ -191,9 +191,9 @@ def run_design(args: argparse.Namespace) -> int:
         from .select import run_select
 
         return run_select(args)
-    from .._model.robot_files import is_tree_file
+    from .tree import given_as_tree
 
-    if is_tree_file(args.robot):
+    if given_as_tree(args, "choose poses"):
         from .select import design_tree
 
         return design_tree(args)

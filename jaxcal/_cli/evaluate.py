@@ -13,6 +13,7 @@ import numpy as np
 
 from .._format import format_table
 from .main import add_prior_argument, add_robot_argument, print_json
+from .tree import given_as_tree
 
 
 def register(sub) -> None:
@@ -145,7 +146,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from .._io import read_dataset
-    from .._model.robot_files import is_tree_file
     from .._plausibility import merged_q2_levels
     from .._robot_file import load_robot
     from ..design._bound import design_bound
@@ -153,15 +153,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from ..design._criteria import design_criteria
     from ..design._parameter_sets import default_relative, resolve_parameters
 
-    if is_tree_file(args.robot):
+    if given_as_tree(args, "judge a plan"):
         from .evaluate_tree import evaluate_tree
 
         return evaluate_tree(args)
-    if args.params or args.prior:
-        raise ValueError(
-            "--params and --prior judge a plan for a robot given as a kinematic tree "
-            "(absolute marker data)"
-        )
     robot = load_robot(args.robot)
     data = read_dataset(args.design, robot, require_deflection=False, ignore_deflection=True)
     moment = data.moment if data.has_moments else None

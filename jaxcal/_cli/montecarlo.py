@@ -93,19 +93,15 @@ def run(args: argparse.Namespace) -> int:
 
     from .._identification.result import resolve_name
     from .._io import read_dataset
-    from .._model.robot_files import is_tree_file
     from .._robot_file import load_robot
     from ..montecarlo._processes import join_processes, run_local_processes
     from ..montecarlo._study import monte_carlo
+    from .tree import given_as_tree
 
-    if is_tree_file(args.robot):
+    if given_as_tree(args, "set the study's calibration"):
         from .montecarlo_tree import montecarlo_tree
 
         return montecarlo_tree(args)
-    if args.params or args.prior:
-        raise ValueError(
-            "--params and --prior are for a robot given as a kinematic tree (absolute marker data)"
-        )
     if args.processes < 1:
         raise ValueError(f"--processes must be at least 1, got {args.processes}")
     if args.processes > 1 and "JAXCAL_COORDINATOR" not in os.environ:

@@ -11,6 +11,7 @@ import numpy as np
 
 from .._format import format_table
 from .main import output_failed, print_json, priors_of
+from .tree import given_as_tree
 
 _NAMES = {"det": "log det of the covariance", "trace": "trace of the relative covariance"}
 _STARTS = {
@@ -36,15 +37,8 @@ def run_select(args: argparse.Namespace) -> int:
         raise ValueError("--criterion task needs --task TASK.csv")
     if args.task and args.criterion != "task":
         raise ValueError("--task TASK.csv goes with --criterion task")
-    from .._model.robot_files import is_tree_file
-
-    if is_tree_file(args.robot):
+    if given_as_tree(args, "choose rows"):
         return _run_tree(args)
-    if args.prior or args.params:
-        raise ValueError(
-            "--prior and --params choose rows for a robot given as a kinematic tree "
-            "(absolute marker data)"
-        )
     robot = load_robot(args.robot)
     pool = read_dataset(args.pool, robot, require_deflection=False, ignore_deflection=True)
     if not 1 <= args.select <= len(pool):

@@ -33,6 +33,21 @@ def saved_block(spec) -> dict:
     return block if isinstance(block, dict) else {}
 
 
+def given_as_tree(args, doing: str) -> bool:
+    """Whether `--robot` is a robot given as a kinematic tree; for the FANUC form the
+    tree's options (`--params`, `--prior`) are refused, `doing` saying what they do."""
+    from .._model.robot_files import is_tree_file
+
+    if is_tree_file(args.robot):
+        return True
+    if getattr(args, "params", None) or getattr(args, "prior", None):
+        raise ValueError(
+            f"--params and --prior {doing} for a robot given as a kinematic tree "
+            "(absolute marker data)"
+        )
+    return False
+
+
 def tree_robot(args):
     """The tree robot of `--robot`; a URDF read without a sidecar says which defaults
     stand in for what it cannot say (compliances, markers, world frame, ...)."""
