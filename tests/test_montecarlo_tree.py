@@ -58,6 +58,9 @@ def test_full_calibrations_match_the_linearised_ones_on_the_same_noise(fanuc, pl
     # Each trial's own std is the posterior at its estimate: within 1 % of the plan's.
     plan_std = np.broadcast_to(st.predicted_std[f], (4, 6))
     np.testing.assert_allclose(st.stds[:, f], plan_std, rtol=1e-2)
+    # The trials pass the plan's fitted set to the calibration; a wrong one is named.
+    with pytest.raises(ValueError, match=r"fitted must have shape \(6,\), got \(3,\)"):
+        jaxcal.calibrate_tree(fanuc, plan, fitted=np.ones(3, bool))
 
 
 def test_cli_study_of_a_tree_robot(tmp_path, data_dir, capsys):

@@ -280,6 +280,7 @@ def calibrate_tree(
     threshold: float = THRESHOLD,
     hold_undetermined: bool = False,
     priors: dict[str, PriorSpec] | None = None,
+    fitted: np.ndarray | None = None,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
@@ -291,13 +292,16 @@ def calibrate_tree(
     at the robot's values and the fit repeated (until none is left). `priors`: Gaussian
     priors centred on the robot's values, `{group or parameter name: std}` with the std
     in the parameter's printed unit or `"X%"` of its value (`prior_stds`); a parameter
-    with a prior is fitted (unless held) whether or not the data determine it. Never
-    raises on a failed fit: see `converged` and `message`.
+    with a prior is fitted (unless held) whether or not the data determine it.
+    `fitted` `(P,)`, where already known for these poses (repeated fits of one plan,
+    `linearised_plan(...).fitted`): the parameters to fit, without the start Jacobian
+    that chooses them (`hold` and `fit_groups` still apply). Never raises on a failed
+    fit: see `converged` and `message`.
     """
     require_float64("calibration", robot.compliance, np.asarray(data.q))
     if not threshold > 0:
         raise ValueError(f"threshold must be positive, got {threshold}")
-    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)
+    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors, fitted)
     flagged: dict[str, tuple[float, float]] = {}
     while True:
         over = _undetermined(cal.table, cal.fitted, cal.estimate, cal.std, threshold)
@@ -317,7 +321,9 @@ def calibrate_tree(
     )
 
 
-def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) -> TreeCalibration:
+def _calibrate(
+    robot, data, groups, fit_groups, hold, max_steps, rcond, priors, chosen=None
+) -> TreeCalibration:
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
     t0 = time.perf_counter()
@@ -337,10 +343,15 @@ def _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors) 
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
-    J = np.asarray(
-        _weighted_jacobian(robot, table, x, data.deflection, rows, markers, sigma, scale)
-    )
-    fitted = fitted_parameters(J, want, has_prior, rcond)
+    if chosen is None:
+        J = np.asarray(
+            _weighted_jacobian(robot, table, x, data.deflection, rows, markers, sigma, scale)
+        )
+        fitted = fitted_parameters(J, want, has_prior, rcond)
+    else:
+        if np.shape(chosen) != (len(table),):
+            raise ValueError(f"fitted must have shape ({len(table)},), got {np.shape(chosen)}")
+        fitted = np.asarray(chosen, bool) & want
     fit = _fit(
         robot,
         table,

@@ -10,9 +10,9 @@ Two methods:
   at once, one matrix product. It shows the design's statistics under the linear model
   (with priors centred on the truth its spread is below the posterior std).
 - `"nonlinear"`: each trial a full Levenberg–Marquardt calibration through the
-  equilibria (`calibrate_tree`, started at the truth), one compiled program for all
-  trials; its spread against the linear one shows the model's nonlinearity, and failed
-  fits are counted and left out.
+  equilibria (`calibrate_tree`, started at the truth, its fitted set the plan's), one
+  compiled program for all trials; its spread against the linear one shows the model's
+  nonlinearity, and failed fits are counted and left out.
 
 Both methods draw the same noise for the same seed, trial by trial.
 """
@@ -184,7 +184,8 @@ def tree_study(
         for t in range(trials):
             y = np.full(np.shape(y0), np.nan)
             y[rows, markers] = y0[rows, markers] + sigma[rows, None] * e[t]
-            cal = calibrate_tree(robot, dataclasses.replace(plan, markers=y), groups, priors=priors)
+            noisy = dataclasses.replace(plan, markers=y)
+            cal = calibrate_tree(robot, noisy, groups, priors=priors, fitted=cols)
             est[t], stds[t], converged[t] = cal.estimate, cal.std, cal.converged
             if t == 0:
                 first = time.perf_counter() - t0
