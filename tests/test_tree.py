@@ -495,6 +495,9 @@ def test_cli_designs_poses_and_evaluate_reads_them_back(tmp_path, capsys):
     e = json.loads(capsys.readouterr().out)
     assert e["trace"] == pytest.approx(d["value"], rel=1e-9)
     assert 0 < e["efficiency"] <= 1
+    # The FANUC form's design options are refused by name.
+    assert main(["design", "--repeats", "2", *args]) == 2
+    assert "--repeats: for the FANUC form's optimised poses" in capsys.readouterr().err
 
 
 def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):

@@ -103,6 +103,25 @@ def design_tree(args: argparse.Namespace) -> int:
     from ..design import select_tree_rows
     from .tree import tree_robot
 
+    for flag, given in (
+        ("--distinct", args.distinct is not None),
+        ("--repeats", args.repeats != 1),
+        ("--parameters", args.parameters != "aggregated"),
+        ("--loads", args.loads != "vertical"),
+        ("--groups", args.groups is not None),
+        ("--group-sizes", args.group_sizes is not None),
+        ("--level-gap", args.level_gap != 20.0),
+        ("--q2-levels", args.q2_levels != "span"),
+        ("--model", args.model is not None),
+        ("--starts", args.starts != 8),
+        ("--steps", args.steps != 300),
+        ("--pool", args.pool != 0),
+    ):
+        if given:
+            raise ValueError(
+                f"{flag}: for the FANUC form's optimised poses; a tree robot's are chosen "
+                "among --bound-pool candidates (--configs, --criterion, --params, --prior)"
+            )
     if args.criterion not in ("det", "trace", "task"):
         raise ValueError(
             f"--criterion {args.criterion}: a tree robot's poses are chosen by det, trace or task"
