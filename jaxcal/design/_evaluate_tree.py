@@ -20,7 +20,6 @@ the data's information alone, and a deflection plan's loads are the user's: no b
 from __future__ import annotations
 
 import dataclasses
-from typing import NamedTuple
 
 import numpy as np
 
@@ -28,19 +27,15 @@ from .._identification.elastogeometric import MAGNITUDE_GROUPS, scaled_jacobian
 from .._identification.parameter_groups import (
     Parameter,
     PriorSpec,
-    default_groups,
     get_vector,
-    parameter_table,
-    prior_stds,
 )
-from .._identification.pivoting import fitted_parameters
 from .._identification.result import THRESHOLD, relative_std
 from .._markers import MarkerData, random_plan
 from .._model.tree import TreeRobot
 from ._select import pool_bound
-from ._select_tree import row_blocks, task_weight
+from ._select_tree import linearised_plan, row_blocks, task_weight
 
-__all__ = ["LinearisedPlan", "TreePlanEvaluation", "evaluate_tree_plan", "linearised_plan"]
+__all__ = ["TreePlanEvaluation", "evaluate_tree_plan"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,43 +120,6 @@ class TreePlanEvaluation:
             "efficiency": self.efficiency,
             "bound_note": self.bound_note,
         }
-
-
-class LinearisedPlan(NamedTuple):
-    """A plan's calibration linearised at a robot: `table` and `fitted` `(P,)` (as
-    `calibrate_tree` would choose), `J` `(m, 3, P)` the σ-weighted marker Jacobian of the
-    plan's seen markers in units of the parameters' typical sizes `scale` `(P,)`, `A`
-    `(3m, p)` its fitted columns, `information` `(p, p)` = `AᵀA` plus the priors', and
-    `prior_std` `(P,)` SI (`inf`: none)."""
-
-    table: tuple[Parameter, ...]
-    fitted: np.ndarray
-    J: np.ndarray
-    A: np.ndarray
-    information: np.ndarray
-    scale: np.ndarray
-    prior_std: np.ndarray
-
-
-def linearised_plan(
-    robot: TreeRobot,
-    plan: MarkerData,
-    groups: tuple[str, ...] | None = None,
-    priors: dict[str, PriorSpec] | None = None,
-) -> LinearisedPlan:
-    """Host-side: the calibration of `groups` (default `default_groups(robot)`) with
-    `priors` on the rows of `plan`, linearised at `robot`'s values."""
-    groups = default_groups(robot, plan.deflection) if groups is None else groups
-    table = parameter_table(robot, groups)
-    P = len(table)
-    prior = prior_stds(robot, table, priors)
-    has_prior = np.isfinite(prior)
-    J = scaled_jacobian(robot, table, plan)  # (m, 3, P): σ-weighted, typical-size units
-    cols = fitted_parameters(J.reshape(-1, P), np.ones(P, bool), has_prior)
-    scale = np.array([p.scale for p in table])
-    info = np.where(has_prior, (scale / np.where(has_prior, prior, 1.0)) ** 2, 0.0)[cols]
-    A = J.reshape(-1, P)[:, cols]
-    return LinearisedPlan(table, cols, J, A, A.T @ A + np.diag(info), scale, prior)
 
 
 def evaluate_tree_plan(

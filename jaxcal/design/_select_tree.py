@@ -9,7 +9,8 @@ in the parameters of the calibration's groups. Parameters with a prior are alway
 those the whole pool determines are in and the rest are named and left out: the choice
 `calibrate_tree` makes (`fitted_parameters`). With priors a subset of fewer rows
 than parameters still has a posterior covariance, which is what makes a 10–50 row
-selection for Agile Justin's ~100 parameters meaningful.
+selection for Agile Justin's ~100 parameters meaningful. That linearisation of a plan
+(`linearised_plan`) is also what `evaluate_tree_plan` and the tree Monte-Carlo use.
 
 The task criterion's `W` is the mean, over the task rows' seen markers, of `JᵀJ` of
 the 3-D marker position (m per parameter unit): `trace(C W)` is the mean square marker
@@ -19,6 +20,7 @@ error (m²) the calibration leaves on the task's poses.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,7 +38,7 @@ from .._model.tree import TreeRobot
 from ._select import SELECT_CRITERIA, pool_bound, select_rows, subset_values
 from ._select_pool import PoolSelection, selection_efficiency
 
-__all__ = ["row_blocks", "select_tree_rows", "task_weight"]
+__all__ = ["LinearisedPlan", "linearised_plan", "row_blocks", "select_tree_rows", "task_weight"]
 
 
 def row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
@@ -47,6 +49,45 @@ def row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
     out = np.zeros((n, K, 3, J.shape[-1]))
     out[rows, markers] = J
     return out.reshape(n, 3 * K, -1)
+
+
+class LinearisedPlan(NamedTuple):
+    """A plan's calibration linearised at a robot: `table` and `fitted` `(P,)` (as
+    `calibrate_tree` would choose), `J` `(m, 3, P)` the σ-weighted marker Jacobian of the
+    plan's seen markers in units of the parameters' typical sizes `scale` `(P,)`, `A`
+    `(3m, p)` its fitted columns, `prior_information` `(p,)` the priors' (`(scale/std)²`,
+    0 where none), `information` `(p, p)` = `AᵀA + diag(prior_information)`, and
+    `prior_std` `(P,)` SI (`inf`: none)."""
+
+    table: tuple[Parameter, ...]
+    fitted: np.ndarray
+    J: np.ndarray
+    A: np.ndarray
+    prior_information: np.ndarray
+    information: np.ndarray
+    scale: np.ndarray
+    prior_std: np.ndarray
+
+
+def linearised_plan(
+    robot: TreeRobot,
+    plan: MarkerData,
+    groups: tuple[str, ...] | None = None,
+    priors: dict[str, PriorSpec] | None = None,
+) -> LinearisedPlan:
+    """Host-side: the calibration of `groups` (default `default_groups(robot)`) with
+    `priors` on the rows of `plan`, linearised at `robot`'s values."""
+    groups = default_groups(robot, plan.deflection) if groups is None else groups
+    table = parameter_table(robot, groups)
+    P = len(table)
+    prior = prior_stds(robot, table, priors)
+    has_prior = np.isfinite(prior)
+    J = scaled_jacobian(robot, table, plan)  # (m, 3, P): σ-weighted, typical-size units
+    cols = fitted_parameters(J.reshape(-1, P), np.ones(P, bool), has_prior)
+    scale = np.array([p.scale for p in table])
+    info = np.where(has_prior, (scale / np.where(has_prior, prior, 1.0)) ** 2, 0.0)[cols]
+    A = J.reshape(-1, P)[:, cols]
+    return LinearisedPlan(table, cols, J, A, info, A.T @ A + np.diag(info), scale, prior)
 
 
 def task_weight(
@@ -87,15 +128,9 @@ def select_tree_rows(
         raise ValueError("the task criterion needs the task's rows (task=...)")
     if not 1 <= k <= len(pool.q):
         raise ValueError(f"k must be in 1..{len(pool.q)} (the pool's rows), got {k}")
-    groups = default_groups(robot, pool.deflection) if groups is None else groups
-    table = parameter_table(robot, groups)
-    std = prior_stds(robot, table, priors)
-    has_prior = np.isfinite(std)
-    J = scaled_jacobian(robot, table, pool)  # (m, 3, P): σ-weighted, typical-size units
-    cols = fitted_parameters(J.reshape(-1, len(table)), np.ones(len(table), bool), has_prior)
-    obs = row_blocks(J, pool)[:, :, cols]
-    scale = np.array([p.scale for p in table])
-    prior = np.where(has_prior, (scale / np.where(has_prior, std, 1.0)) ** 2, 0.0)[cols]
+    lin = linearised_plan(robot, pool, groups, priors)
+    table, cols, prior = lin.table, lin.fitted, lin.prior_information
+    obs = row_blocks(lin.J, pool)[:, :, cols]
     W = None
     if criterion == "task":
         assert task is not None
@@ -106,7 +141,7 @@ def select_tree_rows(
     subsets = [rng.choice(len(pool.q), k, replace=False) for _ in range(random_subsets)]
     rand = subset_values(obs, ones, subsets, criterion=criterion, weight=W, prior=prior)
     names = tuple(p.name for p, c in zip(table, cols, strict=True) if c)
-    if has_prior.any():
+    if np.isfinite(lin.prior_std).any():
         return PoolSelection(sel, names, float("nan"), float("nan"), rand)
     bound = pool_bound(obs, ones, k, criterion=criterion, weight=W)
     eff = selection_efficiency(criterion, sel.value, bound, obs.shape[-1])

@@ -36,7 +36,7 @@ from .._identification.result import Z95
 from .._identification.tree_validation import predicted_markers
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from ..design._evaluate_tree import linearised_plan
+from ..design._select_tree import linearised_plan
 
 __all__ = ["TREE_METHODS", "TreeStudy", "tree_study"]
 
