@@ -191,14 +191,14 @@ def run_design(args: argparse.Namespace) -> int:
         from .select import run_select
 
         return run_select(args)
+    if args.select is not None:
+        raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
     from .tree import given_as_tree
 
     if given_as_tree(args, "choose poses"):
         from .select import design_tree
 
         return design_tree(args)
-    if args.select is not None:
-        raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
     task = None
     if args.criterion == "task":
         if not args.task:

@@ -11,7 +11,7 @@ import numpy as np
 
 from .._format import format_table
 from .main import print_json, priors_of
-from .tree import priors_line, tree_robot
+from .tree import priors_line, refuse_options, tree_robot
 
 _HEAD = ["parameter", "group", "nominal", "std", "relative std %", "prior std", "unit"]
 
@@ -21,16 +21,15 @@ def evaluate_tree(args: argparse.Namespace) -> int:
     from .._markers import read_markers
     from ..design import evaluate_tree_plan
 
-    for flag, given in (
-        ("--absolute", args.absolute),
-        ("--parameters", args.parameters != "aggregated"),
-        ("--model", args.model != "full"),
-    ):
-        if given:
-            raise ValueError(
-                f"{flag}: for the FANUC form; a tree robot's plan is judged for the "
-                "calibration of --params GROUPS with --prior (as identify)"
-            )
+    refuse_options(
+        (
+            ("--absolute", args.absolute),
+            ("--parameters", args.parameters != "aggregated"),
+            ("--model", args.model != "full"),
+        ),
+        "for the FANUC form; a tree robot's plan is judged for the calibration of --params "
+        "GROUPS with --prior (as identify)",
+    )
     robot = tree_robot(args)
     plan = read_markers(args.design, robot, require_markers=False)
     task = read_markers(args.task, robot, require_markers=False) if args.task else None

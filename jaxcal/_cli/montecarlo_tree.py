@@ -8,7 +8,7 @@ import sys
 
 from .._format import format_table
 from .main import print_json, priors_of
-from .tree import priors_line, tree_robot
+from .tree import priors_line, refuse_options, tree_robot
 
 _HEAD = ["parameter", "unit", "true", "mean", "bias", "std", "rmse", "predicted std", "cover95 %"]
 
@@ -18,17 +18,15 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
     from .._markers import read_markers
     from ..montecarlo._tree import TREE_METHODS, tree_study
 
-    for flag, given in (
-        ("--processes", args.processes != 1),
-        ("--student-t", args.student_t is not None),
-        ("--chunk", args.chunk is not None),
-        ("--fix", bool(args.fix)),
-    ):
-        if given:
-            raise ValueError(
-                f"{flag}: for the FANUC form; a tree robot's study takes --params GROUPS "
-                "and --prior (as identify)"
-            )
+    refuse_options(
+        (
+            ("--processes", args.processes != 1),
+            ("--student-t", args.student_t is not None),
+            ("--chunk", args.chunk is not None),
+            ("--fix", bool(args.fix)),
+        ),
+        "for the FANUC form; a tree robot's study takes --params GROUPS and --prior (as identify)",
+    )
     if args.method not in TREE_METHODS:
         raise ValueError(
             f"--method {args.method}: a tree robot's study is {' or '.join(TREE_METHODS)}"

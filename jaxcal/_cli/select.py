@@ -11,7 +11,7 @@ import numpy as np
 
 from .._format import format_table
 from .main import output_failed, print_json, priors_of
-from .tree import given_as_tree
+from .tree import given_as_tree, refuse_options
 
 _NAMES = {"det": "log det of the covariance", "trace": "trace of the relative covariance"}
 _STARTS = {
@@ -24,19 +24,11 @@ _STARTS = {
 def run_select(args: argparse.Namespace) -> int:
     from .._io import read_dataset, write_dataset
     from .._robot_file import load_robot
-    from ..design import SELECT_CRITERIA, select_from_pool
+    from ..design import select_from_pool
 
-    if args.criterion not in SELECT_CRITERIA:
-        raise ValueError(
-            f"--criterion {args.criterion}: rows of a pool are chosen by "
-            f"{', '.join(SELECT_CRITERIA)}"
-        )
+    _check_criterion(args, "rows of a pool")
     if args.select is None:
         raise ValueError("--pool CANDIDATES.csv needs --select K (how many rows to choose)")
-    if args.criterion == "task" and not args.task:
-        raise ValueError("--criterion task needs --task TASK.csv")
-    if args.task and args.criterion != "task":
-        raise ValueError("--task TASK.csv goes with --criterion task")
     if given_as_tree(args, "choose rows"):
         return _run_tree(args)
     robot = load_robot(args.robot)
@@ -103,35 +95,25 @@ def design_tree(args: argparse.Namespace) -> int:
     from ..design import select_tree_rows
     from .tree import tree_robot
 
-    for flag, given in (
-        ("--distinct", args.distinct is not None),
-        ("--repeats", args.repeats != 1),
-        ("--parameters", args.parameters != "aggregated"),
-        ("--loads", args.loads != "vertical"),
-        ("--groups", args.groups is not None),
-        ("--group-sizes", args.group_sizes is not None),
-        ("--level-gap", args.level_gap != 20.0),
-        ("--q2-levels", args.q2_levels != "span"),
-        ("--model", args.model is not None),
-        ("--starts", args.starts != 8),
-        ("--steps", args.steps != 300),
-        ("--pool", args.pool != 0),
-    ):
-        if given:
-            raise ValueError(
-                f"{flag}: for the FANUC form's optimised poses; a tree robot's are chosen "
-                "among --bound-pool candidates (--configs, --criterion, --params, --prior)"
-            )
-    if args.criterion not in ("det", "trace", "task"):
-        raise ValueError(
-            f"--criterion {args.criterion}: a tree robot's poses are chosen by det, trace or task"
-        )
-    if args.criterion == "task" and not args.task:
-        raise ValueError("--criterion task needs --task TASK.csv")
-    if args.task and args.criterion != "task":
-        raise ValueError("--task TASK.csv goes with --criterion task")
-    if args.select is not None:
-        raise ValueError("--select K chooses rows of a candidate file: give --pool CANDIDATES.csv")
+    refuse_options(
+        (
+            ("--distinct", args.distinct is not None),
+            ("--repeats", args.repeats != 1),
+            ("--parameters", args.parameters != "aggregated"),
+            ("--loads", args.loads != "vertical"),
+            ("--groups", args.groups is not None),
+            ("--group-sizes", args.group_sizes is not None),
+            ("--level-gap", args.level_gap != 20.0),
+            ("--q2-levels", args.q2_levels != "span"),
+            ("--model", args.model is not None),
+            ("--starts", args.starts != 8),
+            ("--steps", args.steps != 300),
+            ("--pool", args.pool != 0),
+        ),
+        "for the FANUC form's optimised poses; a tree robot's are chosen among --bound-pool "
+        "candidates (--configs, --criterion, --params, --prior)",
+    )
+    _check_criterion(args, "a tree robot's poses")
     k = 12 if args.configs is None else args.configs
     if not 1 <= k <= args.bound_pool:
         raise ValueError(
@@ -163,6 +145,20 @@ def design_tree(args: argparse.Namespace) -> int:
         return len(chosen)
 
     return _finish(args, out, d, write)
+
+
+def _check_criterion(args: argparse.Namespace, chosen: str) -> None:
+    """`--criterion` among the exchange's criteria, and `--task` with `task` alone."""
+    from ..design import SELECT_CRITERIA
+
+    if args.criterion not in SELECT_CRITERIA:
+        raise ValueError(
+            f"--criterion {args.criterion}: {chosen} are chosen by {', '.join(SELECT_CRITERIA)}"
+        )
+    if args.criterion == "task" and not args.task:
+        raise ValueError("--criterion task needs --task TASK.csv")
+    if args.task and args.criterion != "task":
+        raise ValueError("--task TASK.csv goes with --criterion task")
 
 
 def _finish(args, out, d: dict, write) -> int:

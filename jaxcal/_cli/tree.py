@@ -48,6 +48,14 @@ def given_as_tree(args, doing: str) -> bool:
     return False
 
 
+def refuse_options(options, why: str) -> None:
+    """`ValueError` `FLAG: why` for the first of `options`, `(flag, given)` pairs, that
+    was given: the FANUC form's options a tree robot's command does not take."""
+    for flag, given in options:
+        if given:
+            raise ValueError(f"{flag}: {why}")
+
+
 def tree_robot(args):
     """The tree robot of `--robot`; a URDF read without a sidecar says which defaults
     stand in for what it cannot say (compliances, markers, world frame, ...)."""

@@ -144,12 +144,8 @@ def evaluate_tree_plan(
     if bound_pool < 0:
         raise ValueError(f"bound_pool must be ≥ 0, got {bound_pool}")
     lin = linearised_plan(robot, plan, groups, priors)
-    table, cols, scale, P = lin.table, lin.fitted, lin.scale, len(lin.table)
-    L = np.linalg.cholesky(lin.information)
-    Linv = np.linalg.solve(L, np.eye(L.shape[0]))
-    C = Linv.T @ Linv
-    std = np.full(P, np.nan)
-    std[cols] = np.sqrt(np.diagonal(C)) * scale[cols]
+    table, cols = lin.table, lin.fitted
+    C, logdet = lin.covariance()
     trace = float(np.trace(C))
     rms = None
     if task is not None:
@@ -174,10 +170,10 @@ def evaluate_tree_plan(
         table=table,
         fitted=cols,
         nominal=np.asarray(get_vector(robot, table)),
-        std=std,
+        std=lin.std(C),
         prior_std=lin.prior_std,
         trace=trace,
-        logdet=-2.0 * float(np.sum(np.log(np.diagonal(L)))),
+        logdet=logdet,
         task_rms_mm=rms,
         bound=bound,
         efficiency=eff,

@@ -49,6 +49,7 @@ __all__ = [
     "pool_bound",
     "subset_values",
     "swap_values",
+    "cholesky_inverse",
 ]
 
 SELECT_CRITERIA: tuple[str, ...] = ("det", "trace", "task")
@@ -75,7 +76,7 @@ class Selection:
     start: str = "given"
 
 
-def _inverse(M: np.ndarray) -> tuple[np.ndarray, float] | None:
+def cholesky_inverse(M: np.ndarray) -> tuple[np.ndarray, float] | None:
     """`(M⁻¹, log det M⁻¹)` by Cholesky, or `None` when `M` is not positive definite."""
     try:
         L = np.linalg.cholesky(M)
@@ -86,9 +87,9 @@ def _inverse(M: np.ndarray) -> tuple[np.ndarray, float] | None:
 
 
 def _determined(M: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """`_inverse(M)` where the rows behind `M` determine every parameter (condition
+    """`cholesky_inverse(M)` where the rows behind `M` determine every parameter (condition
     number below 1e12), else `None`."""
-    inv = _inverse(M)
+    inv = cholesky_inverse(M)
     return inv if inv is not None and np.linalg.cond(M) < 1e12 else None
 
 
@@ -213,7 +214,7 @@ def _greedy(A, info, P0, ridge, k: int, criterion: str, W) -> list[int]:
     M = P0.copy()
     for _ in range(k):
         free = np.setdiff1d(np.arange(n), chosen)
-        base = _inverse(M + ridge)
+        base = cholesky_inverse(M + ridge)
         assert base is not None
         j = int(free[int(np.argmin(_with_rows(base, criterion, W, A[free])))])
         chosen.append(j)
@@ -235,7 +236,7 @@ def _exchange(A, info, P0, ridge, chosen, criterion: str, W, tol: float, max_exc
     n = len(A)
     chosen = list(chosen)
     M = P0 + info[chosen].sum(0)
-    full = _inverse(M + ridge)
+    full = cholesky_inverse(M + ridge)
     assert full is not None
     value = start_value = _value(full, criterion, W)
     exchanges = 0
@@ -245,7 +246,7 @@ def _exchange(A, info, P0, ridge, chosen, criterion: str, W, tol: float, max_exc
             break
         v = swap_values(full, A, chosen, free, criterion, W)
         for a in np.flatnonzero(np.isnan(v[:, 0])):
-            base = _inverse(M - info[chosen[a]] + ridge)
+            base = cholesky_inverse(M - info[chosen[a]] + ridge)
             if base is not None:  # else round-off of the downdate: no swap of this row
                 v[a] = _with_rows(base, criterion, W, A[free])
         a, j = np.unravel_index(int(np.nanargmin(v)), v.shape)
@@ -257,7 +258,7 @@ def _exchange(A, info, P0, ridge, chosen, criterion: str, W, tol: float, max_exc
         M = M - info[chosen[a]] + info[j]
         chosen[a] = j
         exchanges += 1
-        again = _inverse(M + ridge)
+        again = cholesky_inverse(M + ridge)
         assert again is not None
         full, value = again, _value(again, criterion, W)  # afresh: no drift of the updates
     return chosen, value, start_value, exchanges
@@ -328,7 +329,7 @@ def _approximate(A, criterion: str, W, steps: int, fixed=None):
     for _ in range(steps):
         # As matrix products of the stacked rows (BLAS), not as einsums over (n, r, p).
         Aw = flat * np.repeat(np.sqrt(w), A.shape[1])[:, None]
-        inv = _inverse(fixed + Aw.T @ Aw)
+        inv = cholesky_inverse(fixed + Aw.T @ Aw)
         if inv is None:
             return w, None, d
         Minv, logdet = inv

@@ -35,7 +35,7 @@ from .._identification.parameter_groups import (
 from .._identification.pivoting import fitted_parameters
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from ._select import SELECT_CRITERIA, pool_bound, select_rows, subset_values
+from ._select import SELECT_CRITERIA, cholesky_inverse, pool_bound, select_rows, subset_values
 from ._select_pool import PoolSelection, selection_efficiency
 
 __all__ = ["LinearisedPlan", "linearised_plan", "row_blocks", "select_tree_rows", "task_weight"]
@@ -67,6 +67,21 @@ class LinearisedPlan(NamedTuple):
     information: np.ndarray
     scale: np.ndarray
     prior_std: np.ndarray
+
+    def covariance(self) -> tuple[np.ndarray, float]:
+        """`(C, log det C)`: the fitted parameters' covariance, `information⁻¹`, in
+        units of their typical sizes."""
+        inv = cholesky_inverse(self.information)
+        if inv is None:
+            raise np.linalg.LinAlgError("the plan's information is not positive definite")
+        return inv
+
+    def std(self, C: np.ndarray) -> np.ndarray:
+        """`(P,)` SI standard deviations of covariance `C` (`covariance()`), NaN where
+        a parameter is not fitted."""
+        out = np.full(len(self.table), np.nan)
+        out[self.fitted] = np.sqrt(np.diagonal(C)) * self.scale[self.fitted]
+        return out
 
 
 def linearised_plan(

@@ -166,11 +166,8 @@ def tree_study(
     sigma = np.asarray(plan.sigma, float)
     # Standard normal noise per seen coordinate, the same draws for both methods.
     e = np.random.default_rng(seed).normal(size=(trials, len(rows), 3))
-    L = np.linalg.cholesky(lin.information)
-    Linv = np.linalg.solve(L, np.eye(L.shape[0]))
-    C = Linv.T @ Linv
-    predicted = np.full(P, np.nan)
-    predicted[cols] = np.sqrt(np.diagonal(C)) * scale[cols]
+    C, _ = lin.covariance()
+    predicted = lin.std(C)
     est = np.full((trials, P), np.nan)
     stds = np.zeros((trials, P))
     converged = np.ones(trials, bool)
