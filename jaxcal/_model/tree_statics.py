@@ -85,10 +85,17 @@ def potential(
     phi: Float[Array, "r 3"],
     force: Float[Array, 3] | None = None,
     at: int = 0,
+    moment: tuple[Float[Array, 3], Float[Array, "3 3"]] | None = None,
 ) -> Float[Array, ""]:
     """The potential (J) whose gradient the springs balance: gravity of the masses,
     the spring laws, and the work of a `force` (N, base frame) applied at marker `at`.
-    (The springs' own energy is carried by the equilibrium condition.)"""
+    (The springs' own energy is carried by the equilibrium condition.)
+
+    `moment`: `(M, R₀)`, a moment `M` (N·m, base frame) at marker `at` and the
+    rotation `R₀` of its element at the deflections where the gradient is taken. A
+    finite rotation has no potential, but the term `−M·vee(skew(R(φ) R₀ᵀ))` has, at
+    `R(φ) = R₀`, the gradient of the moment's virtual work `−M·ω` (ω the frame's
+    angular velocity per unit deflection); only its gradient there has a meaning."""
     # One pass through the tree serves the masses and the loaded marker (the gradient
     # of the potential is the residual of every equilibrium step).
     R, t = element_poses(robot, q, phi)
@@ -102,6 +109,11 @@ def potential(
             raise ValueError(f"spring law {law.law!r}: unknown acts_on {law.acts_on!r}")
     if force is not None:
         u = u - jnp.dot(force, marker_of_frames(robot, R, t, at))
+    if moment is not None:
+        M, R0 = moment
+        A = R[robot.marker_element[at]] @ R0.T
+        w = 0.5 * jnp.stack([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]])
+        u = u - jnp.dot(M, w)
     return u
 
 
@@ -139,18 +151,13 @@ def _residual(phi, args):
     robot, q, force, moment, at = args
     compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
     compliance = jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
-    grad = jax.grad(potential, argnums=2)(robot, q, phi, force, at)
-    if moment is not None:
-        # The generalised force of a moment M: M·ω per unit deflection, ω the marker
-        # frame's base-frame angular velocity (a finite rotation has no potential).
-        R = marker_pose(robot, q, phi, at)[0]
-        dR = jax.jacfwd(lambda p: marker_pose(robot, q, p, at)[0])(phi)
-        W = jnp.einsum("abrk,cb->rkac", dR, R)
-        omega = 0.5 * jnp.stack(
-            [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
-            axis=-1,
-        )
-        grad = grad - omega @ moment
+    # The generalised force of a moment, M·ω per unit deflection, is the gradient of
+    # `potential`'s moment term at the frame's own rotation: one reverse pass with the
+    # gravity's, where differentiating the rotation in every deflection took one
+    # forward pass per spring. R₀ is φ's own function (not a constant), so that the
+    # derivatives of this residual (the implicit derivative's) are exact.
+    pair = None if moment is None else (moment, marker_pose(robot, q, phi, at)[0])
+    grad = jax.grad(potential, argnums=2)(robot, q, phi, force, at, pair)
     res = phi + compliance * grad
     for law, _, rows in law_batches(robot):
         if law.acts_on == "torque":  # lost motion: θ = κθ·τ + extra(κθ·τ)
