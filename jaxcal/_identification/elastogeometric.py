@@ -137,14 +137,20 @@ def _predict(robot: TreeRobot, table, p, x, deflection, rows, markers):
     return y[rows, markers], ok
 
 
+#: Poses per call of the host-side Jacobian (`scaled_jacobian`, from which a fit's start
+#: chooses the fitted set): one compiled program serves plans, pools and data of every
+#: size (the last call padded with copies of the first pose), where each size compiled
+#: its own (1–4 s each for Agile Justin's table).
+JACOBIAN_CHUNK = 64
+
+
 # Kept traced on disk (`exported`) while the compilation cache is on: tracing the
 # Jacobian and the fit through the tree's equilibria is most of a warm `identify`'s
 # wait besides the fit itself.
 @exported
 @eqx.filter_jit
-def _weighted_jacobian(robot, table, x, deflection, rows, markers, sigma, scale):
-    _, _, J = _jacobian(robot, table, get_vector(robot, table), x, deflection, rows, markers)
-    return (J * scale / sigma[:, None, None]).reshape(-1, scale.shape[0])
+def _chunk_jacobian(robot, table, x, deflection):
+    return _pose_jacobians(robot, table, get_vector(robot, table), x, deflection)[2]
 
 
 def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: MarkerData) -> np.ndarray:
@@ -153,17 +159,16 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
     units of its parameter's typical size (`Parameter.scale`), at `robot`'s values. A
     plan without measurements (`markers=None`) works too."""
     rows, markers = observations(data)
-    J = _weighted_jacobian(
-        robot,
-        table,
-        poses(data),
-        data.deflection,
-        rows,
-        markers,
-        jnp.asarray(np.asarray(data.sigma)[rows]),
-        jnp.asarray([p.scale for p in table]),
-    )
-    return np.asarray(J).reshape(len(rows), 3, len(table))
+    x = jax.tree.map(np.asarray, poses(data))
+    n, c = x[0].shape[0], JACOBIAN_CHUNK
+    x = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[:1], (-n) % c, axis=0)]), x)
+    parts = [
+        _chunk_jacobian(robot, table, jax.tree.map(lambda a, s=s: a[s : s + c], x), data.deflection)
+        for s in range(0, x[0].shape[0], c)
+    ]
+    J = np.concatenate([np.asarray(j) for j in parts])[:n][rows, markers]
+    scale = np.asarray([p.scale for p in table])
+    return J * scale / np.asarray(data.sigma)[rows][:, None, None]
 
 
 class TreeCalibration(NamedTuple):
@@ -232,10 +237,10 @@ def _undetermined(table, fitted, est, std, threshold) -> list[int]:
     ]
 
 
-def _jacobian(robot: TreeRobot, table, p, x, deflection, rows, markers):
-    """Predictions, ok flags and their Jacobian in `p`, by reverse mode pose by pose: a
-    pose has 3k outputs against P ~ 100 parameters, and the equilibrium's adjoint is one
-    solve per output."""
+def _pose_jacobians(robot: TreeRobot, table, p, x, deflection):
+    """Every pose's marker predictions `(n, k, 3)`, ok flags and their Jacobian in `p`
+    `(n, k, 3, P)`, by reverse mode pose by pose: a pose has 3k outputs against P ~ 100
+    parameters, and the equilibrium's adjoint is one solve per output."""
 
     def pose(p, x):
         r = set_vector(robot, table, p)
@@ -243,6 +248,12 @@ def _jacobian(robot: TreeRobot, table, p, x, deflection, rows, markers):
         return y, (y, ok)
 
     J, (y, ok) = split_map(jax.jacrev(pose, has_aux=True), p, x)
+    return y, ok, J
+
+
+def _jacobian(robot: TreeRobot, table, p, x, deflection, rows, markers):
+    """`_pose_jacobians` at the seen markers `(rows, markers)`."""
+    y, ok, J = _pose_jacobians(robot, table, p, x, deflection)
     return y[rows, markers], ok, J[rows, markers]
 
 
@@ -344,9 +355,7 @@ def _calibrate(
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
     if chosen is None:
-        J = np.asarray(
-            _weighted_jacobian(robot, table, x, data.deflection, rows, markers, sigma, scale)
-        )
+        J = scaled_jacobian(robot, table, data).reshape(-1, len(table))
         fitted = fitted_parameters(J, want, has_prior, rcond)
     else:
         if np.shape(chosen) != (len(table),):
