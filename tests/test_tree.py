@@ -187,6 +187,23 @@ def test_jit_vmap_consistency(justin, data):
     assert ok.all()
 
 
+def test_jacobian_in_calls_of_a_fixed_size_keeps_each_rows_own(justin, data):
+    # `scaled_jacobian` runs one program on fixed-size calls (the last padded): the
+    # BLOCK rows' Jacobian is two calls. Rows 60-69, alone in a call of their own, get
+    # their own rows of it (the same operations; what a batch may change is where the
+    # implicit derivative's iteration stops, JACOBIAN_RTOL). A row mixed up with
+    # another, or a padding row kept, would be off by the whole entry.
+    table = jaxcal.parameter_table(justin, ("frames", "joint-compliance"))
+    whole = scaled_jacobian(justin, table, data.subset(np.arange(BLOCK)))
+    part = scaled_jacobian(justin, table, data.subset(np.arange(60, 70)))
+    seen = np.asarray(data.seen)[:BLOCK]
+    assert whole.shape == (int(seen.sum()), 3, len(table))
+    start = int(seen[:60].sum())
+    np.testing.assert_allclose(
+        whole[start : start + len(part)], part, rtol=0, atol=JACOBIAN_RTOL * np.abs(part).max()
+    )
+
+
 def _write(tmp_path, text):
     p = tmp_path / "bad.csv"
     p.write_text(text)

@@ -139,8 +139,8 @@ def _predict(robot: TreeRobot, table, p, x, deflection, rows, markers):
 
 #: Poses per call of the host-side Jacobian (`scaled_jacobian`, from which a fit's start
 #: chooses the fitted set): one compiled program serves plans, pools and data of every
-#: size (the last call padded with copies of the first pose), where each size compiled
-#: its own (1–4 s each for Agile Justin's table).
+#: size (the last call padded with copies of the first pose) instead of one program per
+#: size (1–4 s of compile each for Agile Justin's table).
 JACOBIAN_CHUNK = 64
 
 

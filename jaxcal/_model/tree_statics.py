@@ -152,10 +152,10 @@ def _residual(phi, args):
     compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
     compliance = jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
     # The generalised force of a moment, M·ω per unit deflection, is the gradient of
-    # `potential`'s moment term at the frame's own rotation: one reverse pass with the
-    # gravity's, where differentiating the rotation in every deflection took one
-    # forward pass per spring. R₀ is φ's own function (not a constant), so that the
-    # derivatives of this residual (the implicit derivative's) are exact.
+    # `potential`'s moment term at the frame's own rotation: it shares gravity's one
+    # reverse pass instead of one forward pass per spring to differentiate the
+    # rotation. R₀ is φ's own function (not a constant), so that the derivatives of
+    # this residual (the implicit derivative's) are exact.
     pair = None if moment is None else (moment, marker_pose(robot, q, phi, at)[0])
     grad = jax.grad(potential, argnums=2)(robot, q, phi, force, at, pair)
     res = phi + compliance * grad
