@@ -27,7 +27,8 @@ from .._robot import G, Robot
 from .._solution import RESULTS, result_of
 from .compensator import spring_energy as _compensator_potential
 from .effects import collect_effects, observe_effects
-from .kinematics import forward, mass_positions, vee_rotation_derivative
+from .kinematics import forward, mass_positions
+from .rotations import vee_rotation_derivative
 
 __all__ = [
     "Equilibrium",

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._robot import Robot
-from .rotations import Rx, Ry, Rz, so3_exp
+from .rotations import Rx, Ry, Rz, so3_exp, vee_rotation_derivative
 
 __all__ = [
     "Pose",
@@ -125,13 +125,6 @@ def mass_positions(robot: Robot, pose: Pose) -> Float[Array, "nmass 3"]:
         return jnp.zeros((0, 3), dtype=robot.mass_at.dtype)
     rows = [frames[b][0] + frames[b][1] @ robot.mass_at[i] for i, b in enumerate(robot.mass_bodies)]
     return jnp.stack(rows)
-
-
-def vee_rotation_derivative(dR: Float[Array, "3 3"], R: Float[Array, "3 3"]) -> Float[Array, 3]:
-    # dR·Rᵀ is skew-symmetric (the base-frame angular velocity); average both halves so
-    # round-off does not favour one.
-    W = dR @ R.T
-    return 0.5 * jnp.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
 
 
 def jacobian_theta(

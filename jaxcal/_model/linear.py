@@ -19,7 +19,8 @@ from .._linalg.solvers import cholesky_solver
 from .._robot import Robot
 from .compensator import compensator_stiffness
 from .equilibrium import dof_scale, equilibrium_residual, solve_state, tool_pose
-from .kinematics import jacobian_theta, vee_rotation_derivative
+from .kinematics import jacobian_theta
+from .rotations import vee_rotation_derivative
 
 __all__ = [
     "joint_stiffness",

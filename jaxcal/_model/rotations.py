@@ -7,7 +7,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-__all__ = ["Rx", "Ry", "Rz", "skew", "so3_exp"]
+__all__ = ["Rx", "Ry", "Rz", "skew", "so3_exp", "vee_rotation_derivative"]
 
 
 def Rx(a: Float[Array, ""]) -> Float[Array, "3 3"]:
@@ -53,3 +53,11 @@ def so3_exp(r: Float[Array, 3]) -> Float[Array, "3 3"]:
     b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2s)
     K = skew(r)
     return jnp.eye(3, dtype=r.dtype) + a * K + b * (K @ K)
+
+
+def vee_rotation_derivative(dR: Float[Array, "3 3"], R: Float[Array, "3 3"]) -> Float[Array, 3]:
+    """The vector of the skew-symmetric part of `dR·Rᵀ`: for `dR` a derivative of the
+    rotation `R`, its base-frame angular velocity."""
+    # dR·Rᵀ is skew-symmetric; average both halves so round-off does not favour one.
+    W = dR @ R.T
+    return 0.5 * jnp.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])

@@ -36,6 +36,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._linalg.iterative import formed_solve, implicit_solve
+from .rotations import vee_rotation_derivative
 from .spring_laws import SpringLaw
 from .tree import TreeRobot
 from .tree_kinematics import (
@@ -111,9 +112,7 @@ def potential(
         u = u - jnp.dot(force, marker_of_frames(robot, R, t, at))
     if moment is not None:
         M, R0 = moment
-        A = R[robot.marker_element[at]] @ R0.T
-        w = 0.5 * jnp.stack([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]])
-        u = u - jnp.dot(M, w)
+        u = u - jnp.dot(M, vee_rotation_derivative(R[robot.marker_element[at]], R0))
     return u
 
 
