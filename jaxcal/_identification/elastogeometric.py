@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from .._batching import split_map
+from .._batching import map_in_chunks, split_map
 from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
@@ -159,14 +159,15 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
     units of its parameter's typical size (`Parameter.scale`), at `robot`'s values. A
     plan without measurements (`markers=None`) works too."""
     rows, markers = observations(data)
-    x = jax.tree.map(np.asarray, poses(data))
-    n, c = x[0].shape[0], JACOBIAN_CHUNK
-    x = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[:1], (-n) % c, axis=0)]), x)
-    parts = [
-        _chunk_jacobian(robot, table, jax.tree.map(lambda a, s=s: a[s : s + c], x), data.deflection)
-        for s in range(0, x[0].shape[0], c)
-    ]
-    J = np.concatenate([np.asarray(j) for j in parts])[:n][rows, markers]
+    q, force, moment = poses(data)
+    J = map_in_chunks(
+        lambda *pose: _chunk_jacobian(robot, table, pose, data.deflection),
+        q.shape[0],
+        JACOBIAN_CHUNK,
+        q,
+        force,
+        moment,
+    )[rows, markers]
     scale = np.asarray([p.scale for p in table])
     return J * scale / np.asarray(data.sigma)[rows][:, None, None]
 
