@@ -19,12 +19,7 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
     from ..montecarlo._tree import TREE_METHODS, tree_study
 
     refuse_options(
-        (
-            ("--processes", args.processes != 1),
-            ("--student-t", args.student_t is not None),
-            ("--chunk", args.chunk is not None),
-            ("--fix", bool(args.fix)),
-        ),
+        (("--processes", args.processes != 1), ("--fix", bool(args.fix))),
         "for the FANUC form; a tree robot's study takes --params GROUPS and --prior (as identify)",
     )
     if args.method not in TREE_METHODS:
@@ -34,12 +29,6 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
     robot = tree_robot(args)
     plan = read_markers(args.design, robot, require_markers=False)
     priors = priors_of(args)
-    show = not args.no_progress and not args.json and sys.stderr.isatty()
-
-    def progress(done: int, total: int) -> None:
-        end = "\n" if done == total else ""
-        print(f"\rtrial {done}/{total}", end=end, file=sys.stderr, flush=True)
-
     st = tree_study(
         robot,
         plan,
@@ -48,21 +37,27 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
         priors=priors,
         method=args.method,
         noise_mm=args.noise_mm,
+        student_t=args.student_t,
         seed=args.seed,
-        progress=progress if show else None,
+        chunk=args.chunk,
+        progress=not args.no_progress and not args.json and sys.stderr.isatty(),
     )
     d = {"robot": robot.name, "plan": args.design, "seed": args.seed, "priors": priors}
     d.update(st.to_dict())
     if args.json:
         print_json(d)
         return 0
+    noise = f"{d['noise_mm']:g} mm (median σ of the rows)"
+    if args.student_t is not None:
+        noise += f", Student-t, nu = {args.student_t:g}"
+    r = st.result
     print(
-        f"{st.method} calibration of {robot.name}, {d['trials']} trials ({d['failed']} failed), "
-        f"noise {d['noise_mm']:g} mm (median σ of the rows), seed {args.seed}"
+        f"{r.method} calibration of {robot.name}, {r.trials} trials ({r.failed} failed), "
+        f"noise {noise}, seed {args.seed}, {r.devices} device(s)"
     )
     print(
-        f"{st.seconds:.3g} s, of which {st.first_seconds:.3g} s until the first trial's "
-        "estimate (the linearisation and compilation)"
+        f"{r.seconds:.3g} s ({r.trials_per_s:.4g} trials/s) after {r.compile_seconds:.3g} s "
+        "compilation"
     )
     rows = [
         [p["name"], p["unit"], p["truth"], p["mean"], p["bias"], p["std"], p["rmse"]]
@@ -70,6 +65,8 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
         for p in d["parameters"]
     ]
     print(format_table(_HEAD, rows))
+    if r.failures:
+        print("failed: " + ", ".join(f"{n} {k}" for n, k in r.failures.items()))
     if d["not_fitted"]:
         print(f"not determined by the plan, held: {', '.join(d['not_fitted'])}")
     if priors:

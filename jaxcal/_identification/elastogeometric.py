@@ -6,11 +6,10 @@ robot's own weight (`nonlinear_fit`). Which of them the data determine is decide
 the data: QR with column pivoting of the σ-weighted Jacobian at the start (as FIGAROH
 does), each column scaled to the parameter's typical size; the columns it does not
 pick are named and held at the robot file's values. A fitted spring, mass or spring-law
-constant whose relative standard deviation exceeds `THRESHOLD` is flagged as *not
-determined by these data* (its value is not to be read on its own). Flagged parameters
-stay fitted unless `hold_undetermined`: on Agile Justin 40 of the 46 fitted springs are
-flagged individually, yet together they take the held-out error from 6.5 mm (held at the
-file's values) to 2.9 mm (`benchmarks/README.md`).
+constant whose relative std exceeds `THRESHOLD` is flagged as *not determined by these
+data* (not to be read on its own); it stays fitted unless `hold_undetermined`: 40 of Agile
+Justin's 46 fitted springs are flagged one by one, yet together they take the held-out
+error from 6.5 mm (held at the file's values) to 2.9 mm (`benchmarks/README.md`).
 
 Optional Gaussian priors (`priors`: a std per group or parameter, centred on the robot
 file's values) make the fit a maximum a posteriori estimate: a parameter with a prior
@@ -58,6 +57,7 @@ from .result import THRESHOLD, Z95, relative_std, upper_bound95
 __all__ = [
     "TreeCalibration",
     "calibrate_tree",
+    "fit_markers",
     "observations",
     "poses",
     "pose_markers",
@@ -74,13 +74,12 @@ LM_TOL = 1e-6
 LM_CHI2_TOL = 1e-3
 
 #: Relative accuracy of the equilibrium's implicit derivative in the observation
-#: Jacobian (fits, designs), looser than the model's default (`DERIVATIVE_RTOL`): it
-#: leaves an error of 1e-5 to 3e-5 relative in the Jacobian, which moves a fit's optimum by
-#: ~1e-4 standard deviations (against the 0.03 at which the fit stops) and its stds by
-#: ~1e-4 relative. Agile Justin's full calibration (300 rows, 152 parameters): the same
-#: 21 steps, χ² equal to 1e-10 relative, estimates within 3e-4 std, stds within 7e-5
-#: relative and held-out errors within 1e-5 mm of a derivative 100 times tighter, in 16 %
-#: less time (two fewer Hessian products per output and pose).
+#: Jacobian (fits, designs), looser than the model's default (`DERIVATIVE_RTOL`): an error
+#: of 1e-5 to 3e-5 relative in the Jacobian moves a fit's optimum by ~1e-4 std (it stops
+#: at 0.03) and its stds by ~1e-4 relative. Agile Justin's full calibration (300 rows, 152
+#: parameters): the same 21 steps, χ² equal to 1e-10 relative, estimates within 3e-4 std,
+#: stds within 7e-5 relative and held-out errors within 1e-5 mm of a derivative 100 times
+#: tighter, in 16 % less time (two fewer Hessian products per output and pose).
 JACOBIAN_RTOL = 1e-4
 
 #: Groups whose parameters are physical magnitudes (a spring, a mass, a law's
@@ -130,11 +129,6 @@ def pose_markers(
 def predict_rows(robot: TreeRobot, x, deflection: bool = False):
     """`pose_markers` at every row of `poses(data)` (traceable): `(n, k, 3)` and `(n,)`."""
     return split_map(lambda r, pose: pose_markers(r, pose, deflection), robot, x)
-
-
-def _predict(robot: TreeRobot, table, p, x, deflection, rows, markers):
-    y, ok = predict_rows(set_vector(robot, table, p), x, deflection)
-    return y[rows, markers], ok
 
 
 #: Poses per call of the host-side Jacobian (`scaled_jacobian`, from which a fit's start
@@ -258,26 +252,33 @@ def _jacobian(robot: TreeRobot, table, p, x, deflection, rows, markers):
     return y[rows, markers], ok, J[rows, markers]
 
 
-@exported
-@eqx.filter_jit
-def _fit(
+def fit_markers(
     robot, table, mask, x, deflection, rows, markers, target, sigma, scale, prior_weight, max_steps
-):
-    p0 = get_vector(robot, table)
+) -> LsqFit:
+    """A calibration's fit, traceable (Monte-Carlo trials map it): `table`'s parameters
+    where `mask` is 1, from `robot`'s values, to the seen markers `target` `(m, 3)` (m; at
+    `rows`, `markers` of `observations`) at the poses `x`, σ `(m,)`."""
+    def jacobian(p):
+        return _jacobian(robot, table, p, x, deflection, rows, markers)
+
+    # Given the Jacobian, `nonlinear_fit` never calls the prediction on its own.
     return nonlinear_fit(
-        lambda p: _predict(robot, table, p, x, deflection, rows, markers),
-        p0,
+        lambda p: jacobian(p)[:2],
+        get_vector(robot, table),
         target,
         sigma,
         scale=scale,
         mask=mask,
-        jacobian=lambda p: _jacobian(robot, table, p, x, deflection, rows, markers),
+        jacobian=jacobian,
         prior_weight=prior_weight,
         max_steps=max_steps,
         rtol=LM_TOL,
         atol=LM_TOL,
         chi2_tol=LM_CHI2_TOL,
     )
+
+
+_fit = exported(eqx.filter_jit(fit_markers))
 
 
 def calibrate_tree(

@@ -1,18 +1,21 @@
 """Monte-Carlo noise study of a tree robot's measurement plan: the robot is the truth, its
 marker positions at the plan's poses are computed once (full equilibria), and each trial
-calibrates it from a noisy copy (Gaussian, σ per row), as `identify` would.
+calibrates it from a noisy copy, as `identify` would.
 
-Two methods:
+The trials run on the engine of every study (`run_study`): chunks of trials compiled
+once and kept for later studies of the same shape, their trial axis sharded over all
+devices, trial `i`'s noise drawn from `(seed, i)` (Gaussian with σ per row, or
+Student-t of the same std), statistics streamed to the host. Two methods:
 
 - `"linear"`: each trial's estimate is the Gauss–Newton step from the truth,
   `δ = (AᵀA + Π)⁻¹ Aᵀ e` (`A` the σ-weighted Jacobian of the plan's seen marker
-  coordinates, `Π` the priors' information, `e` the trial's noise over σ): every trial
-  at once, one matrix product. It shows the design's statistics under the linear model
-  (with priors centred on the truth its spread is below the posterior std).
+  coordinates, `Π` the priors' information, `e` the trial's noise over σ): one matrix
+  product per trial. It shows the design's statistics under the linear model (with
+  priors centred on the truth its spread is below the posterior std).
 - `"nonlinear"`: each trial a full Levenberg–Marquardt calibration through the
-  equilibria (`calibrate_tree`, started at the truth, its fitted set the plan's), one
-  compiled program for all trials; its spread against the linear one shows the model's
-  nonlinearity, and failed fits are counted and left out.
+  equilibria (`fit_markers`, started at the truth, its fitted set the plan's); its
+  spread against the linear one shows the model's nonlinearity, and failed fits are
+  counted by reason and left out.
 
 Both methods draw the same noise for the same seed, trial by trial.
 """
@@ -20,23 +23,29 @@ Both methods draw the same noise for the same seed, trial by trial.
 from __future__ import annotations
 
 import dataclasses
-import time
-from collections.abc import Callable
+from collections.abc import Sequence
+from typing import Any
 
+import jax.numpy as jnp
 import numpy as np
 
-from .._identification.elastogeometric import calibrate_tree, observations
+from .._identification.elastogeometric import fit_markers, observations, poses
 from .._identification.parameter_groups import (
     Parameter,
     PriorSpec,
     default_groups,
     get_vector,
+    prior_stds,
 )
 from .._identification.result import Z95
 from .._identification.tree_validation import predicted_markers
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
+from .._precision import require_float64
 from ..design._select_tree import linearised_plan
+from ._methods import TrialFit
+from ._stats import MonteCarloResult
+from ._study import check_options, run_study
 
 __all__ = ["TREE_METHODS", "TreeStudy", "tree_study"]
 
@@ -45,58 +54,59 @@ TREE_METHODS: tuple[str, ...] = ("linear", "nonlinear")
 
 @dataclasses.dataclass(frozen=True)
 class TreeStudy:
-    """The trials of a tree robot's Monte-Carlo study (SI units).
+    """A tree robot's Monte-Carlo study (SI units).
 
     - `table`, `fitted` `(P,)`: the parameters and those the calibration fits;
-    - `truth` `(P,)`; `estimates` `(T, P)`; `stds` `(T, P)` each trial's own std (the
-      posterior std of the linearisation for `"linear"`); `converged` `(T,)`;
-    - `predicted_std` `(P,)`: the plan's std at the truth (NaN where not fitted);
-    - `noise` `(n,)`: each row's σ (m); `method`; `seconds` in all, `first_seconds` of
-      them until the first trial's estimate (the linearisation, and for `"nonlinear"`
-      the first calibration: the compilation is there).
+    - `truth` `(P,)`; `predicted_std` `(P,)`: the plan's std at the truth;
+    - `noise` `(n,)`: each row's σ (m);
+    - `result`: the study's `MonteCarloResult`, over the fitted parameters in table
+      order (its `estimates`, `(trials − failed, fitted)`, with `keep_estimates`).
 
-    Statistics over the converged trials of the fitted parameters: `mean`, `bias`,
-    `std`, `rmse`, `coverage95` (the share of trials whose own 95 % interval holds the
-    truth).
+    Per parameter, `(P,)` and NaN where not fitted: `mean`, `bias`, `std`, `rmse`,
+    `reported_std` (the mean of the trials' own std), `coverage95` (the share of
+    successful trials whose own 95 % interval holds the truth).
     """
 
     table: tuple[Parameter, ...]
     fitted: np.ndarray
     truth: np.ndarray
-    estimates: np.ndarray
-    stds: np.ndarray
-    converged: np.ndarray
     predicted_std: np.ndarray
     noise: np.ndarray
-    method: str
-    seconds: float
-    first_seconds: float
+    result: MonteCarloResult
 
-    def _ok(self) -> np.ndarray:
-        return self.estimates[self.converged]
+    def _full(self, values: np.ndarray) -> np.ndarray:
+        out = np.full(len(self.table), np.nan)
+        out[self.fitted] = values
+        return out
 
     @property
     def mean(self) -> np.ndarray:
-        return self._ok().mean(axis=0)
+        return self._full(self.result.mean)
 
     @property
     def bias(self) -> np.ndarray:
-        return self.mean - self.truth
+        return self._full(self.result.bias)
 
     @property
     def std(self) -> np.ndarray:
-        return self._ok().std(axis=0, ddof=1)
+        return self._full(self.result.std)
 
     @property
     def rmse(self) -> np.ndarray:
-        return np.sqrt(np.mean((self._ok() - self.truth) ** 2, axis=0))
+        return self._full(self.result.rmse)
+
+    @property
+    def reported_std(self) -> np.ndarray:
+        return self._full(self.result.mean_reported_std)
 
     @property
     def coverage95(self) -> np.ndarray:
-        inside = np.abs(self._ok() - self.truth) <= Z95 * self.stds[self.converged]
-        return inside.mean(axis=0)
+        return self._full(self.result.coverage95)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form of `jaxcal montecarlo PLAN --robot TREE --json`: per fitted
+        parameter in its printed unit."""
+        r = self.result
         cols = {
             "truth": self.truth,
             "mean": self.mean,
@@ -104,6 +114,7 @@ class TreeStudy:
             "std": self.std,
             "rmse": self.rmse,
             "predicted_std": self.predicted_std,
+            "reported_std": self.reported_std,
         }
         params = [
             {
@@ -117,15 +128,39 @@ class TreeStudy:
             if self.fitted[i]
         ]
         return {
-            "method": self.method,
-            "trials": int(len(self.converged)),
-            "failed": int((~self.converged).sum()),
+            "method": r.method,
+            "trials": r.trials,
+            "failed": r.failed,
+            "failures": dict(r.failures),
             "noise_mm": float(np.median(self.noise) * 1e3),
-            "seconds": self.seconds,
-            "first_seconds": self.first_seconds,
+            "student_t": r.student_t,
+            "seconds": r.seconds,
+            "compile_seconds": r.compile_seconds,
+            "trials_per_s": r.trials_per_s,
+            "chunk": r.chunk,
+            "devices": r.devices,
             "parameters": params,
             "not_fitted": [p.name for p, f in zip(self.table, self.fitted, strict=True) if not f],
         }
+
+
+def _linear_trial(d, sigma, force, moment, d0, gain, truth, scale, std):
+    # The Gauss–Newton step from the truth: the trial's noise over σ through C Aᵀ.
+    e = ((d - d0) / sigma[:, None]).reshape(-1)
+    est = truth + scale * (gain @ e)
+    return est, std, est - Z95 * std, est + Z95 * std, jnp.array(True)
+
+
+def _nonlinear_trial(table, deflection, max_steps):
+    def fit(d, sigma, force, moment, robot, x, mask, cols, rows, markers, scale, weight):
+        out = fit_markers(
+            robot, table, mask, x, deflection, rows, markers, d, sigma, scale, weight, max_steps
+        )
+        est = out.estimate[cols]
+        std = jnp.sqrt(jnp.clip(jnp.diagonal(out.covariance), 0.0, None))[cols]
+        return est, std, est - Z95 * std, est + Z95 * std, out.result
+
+    return fit
 
 
 def tree_study(
@@ -137,20 +172,25 @@ def tree_study(
     priors: dict[str, PriorSpec] | None = None,
     method: str = "linear",
     noise_mm: float | None = None,
+    student_t: float | None = None,
     seed: int = 0,
-    progress: Callable[[int, int], None] | None = None,
+    chunk: int | None = None,
+    max_steps: int = 300,
+    keep_estimates: bool = False,
+    devices: Sequence[Any] | None = None,
+    progress: bool = False,
 ) -> TreeStudy:
     """`trials` calibrations of `robot` (the truth) from noisy copies of its marker
     positions at `plan`'s poses (seen markers, loads; measured values ignored), σ the
     plan's per row or `noise_mm`; `groups` and `priors` as `calibrate_tree`; `method`
-    one of `TREE_METHODS` (module docstring). `progress(done, trials)` is called after
-    each nonlinear trial. Raises `ValueError` for bad arguments or a pose whose
-    equilibrium does not converge."""
-    t0 = time.perf_counter()
+    one of `TREE_METHODS` (module docstring); `student_t`, `seed`, `chunk`,
+    `keep_estimates`, `devices` and `progress` as `monte_carlo`; `max_steps` each
+    nonlinear fit's step budget (as `calibrate_tree`). Raises `ValueError` for bad
+    arguments or a pose whose equilibrium does not converge."""
+    require_float64("a Monte-Carlo study", robot.compliance, np.asarray(plan.q))
     if method not in TREE_METHODS:
         raise ValueError(f"method must be one of {TREE_METHODS} for a tree robot, got {method!r}")
-    if trials < 2:
-        raise ValueError(f"trials must be at least 2, got {trials}")
+    check_options(trials, student_t, None)
     if noise_mm is not None:
         if not noise_mm > 0:
             raise ValueError(f"noise_mm must be positive, got {noise_mm}")
@@ -160,44 +200,45 @@ def tree_study(
         raise ValueError(f"the equilibrium did not converge at rows {np.flatnonzero(~ok) + 1}")
     groups = default_groups(robot, plan.deflection) if groups is None else groups
     lin = linearised_plan(robot, plan, groups, priors)
-    cols, scale, P = lin.fitted, lin.scale, len(lin.table)
-    truth = np.asarray(get_vector(robot, lin.table))
+    table, cols, scale = lin.table, lin.fitted, lin.scale
+    truth = np.asarray(get_vector(robot, table))
     rows, markers = observations(plan)
-    sigma = np.asarray(plan.sigma, float)
-    # Standard normal noise per seen coordinate, the same draws for both methods.
-    e = np.random.default_rng(seed).normal(size=(trials, len(rows), 3))
+    d0 = jnp.asarray(y0[rows, markers])
+    sigma = jnp.asarray(np.asarray(plan.sigma, float)[rows])
     C, _ = lin.covariance()
     predicted = lin.std(C)
-    est = np.full((trials, P), np.nan)
-    stds = np.zeros((trials, P))
-    converged = np.ones(trials, bool)
-    est[:] = truth
-    first = time.perf_counter() - t0
+    names = tuple(p.name for p, f in zip(table, cols, strict=True) if f)
     if method == "linear":
-        # J is model − truth per unit step, the noise is measured − model: δ = C Aᵀ e.
-        est[:, cols] += (e.reshape(trials, -1) @ lin.A @ C) * scale[cols]
-        stds[:, cols] = predicted[cols]
+        tf = TrialFit(
+            names,
+            truth[cols],
+            _linear_trial,
+            inputs=(d0, jnp.asarray((lin.A @ C).T), truth[cols], scale[cols], predicted[cols]),
+            shared=("tree", "linear"),
+        )
     else:
-        for t in range(trials):
-            y = np.full(np.shape(y0), np.nan)
-            y[rows, markers] = y0[rows, markers] + sigma[rows, None] * e[t]
-            noisy = dataclasses.replace(plan, markers=y)
-            cal = calibrate_tree(robot, noisy, groups, priors=priors, fitted=cols)
-            est[t], stds[t], converged[t] = cal.estimate, cal.std, cal.converged
-            if t == 0:
-                first = time.perf_counter() - t0
-            if progress is not None:
-                progress(t + 1, trials)
-    return TreeStudy(
-        table=lin.table,
-        fitted=cols,
-        truth=truth,
-        estimates=est,
-        stds=stds,
-        converged=converged,
-        predicted_std=predicted,
-        noise=sigma,
+        prior = prior_stds(robot, table, priors)
+        weight = np.where(np.isfinite(prior), 1.0 / prior, 0.0)  # as `calibrate_tree`
+        inputs = (robot, poses(plan), jnp.asarray(cols, d0.dtype), np.flatnonzero(cols))
+        inputs += (rows, markers, jnp.asarray(scale), jnp.asarray(weight))
+        tf = TrialFit(
+            names,
+            truth[cols],
+            _nonlinear_trial(table, plan.deflection, max_steps),
+            inputs=inputs,
+            shared=("tree", "nonlinear", table, plan.deflection, max_steps),
+        )
+    result = run_study(
+        tf,
+        d0,
+        sigma,
         method=method,
-        seconds=time.perf_counter() - t0,
-        first_seconds=first,
+        trials=trials,
+        student_t=student_t,
+        seed=seed,
+        chunk=chunk,
+        keep_estimates=keep_estimates,
+        devices=devices,
+        progress=progress,
     )
+    return TreeStudy(table, cols, truth, predicted, np.asarray(plan.sigma, float), result)
