@@ -11,11 +11,10 @@
   loop, not numpy against XLA), on the first `--n-baseline` rows.
 
 The two answers are compared (max |Δqc|), and the residual of jaxcal's angles is checked
-by its own verification solve. With `--tree`, the same path is also compensated on the
-FANUC given as a kinematic tree (the general model; compared with the template's qc).
+by its own verification solve. jaxcal compensates the FANUC on its tree (`as_tree`, the
+one general model); the baseline's residual is the quasi-serial template's equilibrium.
 
-Run: `python benchmarks/bench_compensation.py [--n 1000] [--n-baseline 100] [--repeat 3]
-[--tree]`.
+Run: `python benchmarks/bench_compensation.py [--n 1000] [--n-baseline 100] [--repeat 3]`.
 """
 
 from __future__ import annotations
@@ -101,7 +100,6 @@ def main():
     ap.add_argument("--n-baseline", type=int, default=100)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
-    ap.add_argument("--tree", action="store_true", help="also on the FANUC as a tree")
     args = ap.parse_args()
     robot = jaxcal.load_robot()
     path = make_path(args.n)
@@ -124,30 +122,6 @@ def main():
             f"jaxcal {label:13s}: first call {first:6.2f} s, run {min(runs):6.3f} s "
             f"(best of {args.repeat}), {args.n / min(runs):8.0f} rows/s, "
             f"refused {int((~ok).sum())}, max residual {r.max():.2e} m"
-        )
-    if args.tree:
-        tree = jaxcal.load_tree("fanuc_m900ib700")
-        plan = jaxcal.MarkerData(
-            q=path.q,
-            markers=None,
-            seen=np.zeros((args.n, 1), bool),
-            sigma=np.ones(args.n),
-            force=path.force,
-            moment=path.moment,
-        )
-        t_out, first, runs = timed(lambda: compensate(tree, plan), args.repeat)
-        dq = float(np.max(np.abs(np.asarray(t_out.rows.qc) - np.asarray(out.rows.qc))))
-        res["tree"] = {
-            "first_call_s": first,
-            "run_s_best": min(runs),
-            "rows_per_s": args.n / min(runs),
-            "refused": int((~t_out.ok).sum()),
-            "max_abs_dqc_vs_template_rad": dq,
-        }
-        print(
-            f"jaxcal tree         : first call {first:6.2f} s, run {min(runs):6.3f} s "
-            f"(best of {args.repeat}), {args.n / min(runs):8.0f} rows/s, "
-            f"refused {int((~t_out.ok).sum())}, max |Δqc| vs template {dq:.1e} rad"
         )
     nb = min(args.n_baseline, args.n)
     if nb == 0:

@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 
 import jaxcal  # noqa: E402
 from jaxcal import LinearMethod, NonlinearMethod, TwoStepMethod  # noqa: E402
-from jaxcal.internal import compensate_rows as compensate_batch, fit_jit  # noqa: E402
+from jaxcal.internal import fit_jit, robot_covariance, tree_rows  # noqa: E402
 
 DATA = Path(__file__).parent.parent / "tests" / "data" / "example_calibration.csv"
 
@@ -130,16 +130,20 @@ def main():
         1,
     )
     path = jaxcal.Dataset.from_arrays(q, [[800.0, 2800.0, -600.0]] * 1000, [[40.0, -20, 60]] * 1000)
-    cov = jnp.diag((0.01 * jaxcal.get_parameters(robot)) ** 2)
+    tree = jaxcal.as_tree(robot)
+    table, cov = robot_covariance(robot, tree, jnp.diag((0.01 * jaxcal.get_parameters(robot)) ** 2))
     rows.append(
         stages(
             "compensate (1000 rows, res_std)",
-            compensate_batch,
-            robot,
+            tree_rows,
+            tree,
             path.q,
             path.force,
             path.moment,
             cov,
+            table,
+            0,
+            "gravity",
             500.0,
             1.0,
             1e-8,

@@ -189,6 +189,7 @@ from ._robot_file import (
     robot_from_dict as robot_from_dict,
     robot_to_dict as robot_to_dict,
 )
+from ._robot_tree import as_tree as as_tree
 from ._solution import RESULTS as RESULTS
 from .compensation import (
     Compensation as Compensation,

@@ -13,7 +13,13 @@ from jaxtyping import Array, Float
 
 from ._robot import URAD, Robot
 
-__all__ = ["parameter_names", "get_parameters", "set_parameters", "parameter_units"]
+__all__ = [
+    "parameter_names",
+    "get_parameters",
+    "set_parameters",
+    "parameter_units",
+    "tree_parameter_names",
+]
 
 _UNITS = {"urad_per_Nm": "µrad/(N·m)", "N_per_m": "N/m", "m": "m", "urad": "µrad", "N": "N"}
 
@@ -22,6 +28,17 @@ def parameter_names(robot: Robot) -> tuple[str, ...]:
     """Names of the physical parameters: k1..k6, then Kc and s0 if the robot has a
     compensator."""
     return robot.parameter_names
+
+
+def tree_parameter_names(robot: Robot) -> tuple[tuple[str, float], ...]:
+    """For each of `parameter_names(robot)`, the parameter of the robot's tree
+    (`as_tree`, `parameter_table`) that it is, and its factor from the user unit to SI:
+    the springs `J1.k_theta … J6.k_theta` (µrad/(N·m)), the compensator's
+    `compensator0.Kc`, `compensator0.s0`."""
+    names = tuple((f"J{i}.k_theta", URAD) for i in range(1, 7))
+    if robot.has_compensator:
+        names += (("compensator0.Kc", 1.0), ("compensator0.s0", 1.0))
+    return names
 
 
 def parameter_units(name: str) -> str:

@@ -131,6 +131,37 @@ def test_variants_equal_quasi_serial_model(changes):
         np.testing.assert_allclose(theta, jaxcal.equilibrium(robot, q, f, m)[:6], atol=1e-12)
 
 
+def _leaves_equal(a, b, rtol):
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    assert len(la) == len(lb) and a.names == b.names and a.coupling == b.coupling
+    for x, y in zip(la, lb, strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=0)
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [{}, {"parallelogram": False}, {"compensator": None}],
+    ids=["fanuc", "serial", "no-compensator"],
+)
+def test_as_tree_is_the_file_forms_tree_and_traceable(changes):
+    robot, tree = _pair(**changes)
+    _leaves_equal(jaxcal.as_tree(robot), tree, rtol=0)
+    # Every array field of the robot changed: the tree follows each one (the file form
+    # writes compliances in µrad/(N·m): round-off between the two).
+    rng = np.random.default_rng(1)
+    moved = jax.tree.map(
+        lambda x: x * (1 + 0.1 * rng.standard_normal(np.shape(x))) if eqx.is_array(x) else x,
+        robot,
+    )
+    expected = jaxcal.tree_from_dict(
+        jaxcal.tree_dict_from_quasi_serial(jaxcal.robot_to_dict(moved))
+    )
+    _leaves_equal(jaxcal.as_tree(moved), expected, rtol=1e-15)
+    _leaves_equal(eqx.filter_jit(jaxcal.as_tree)(moved), expected, rtol=1e-15)
+    with pytest.raises(ValueError, match="model effects"):
+        jaxcal.as_tree(eqx.tree_at(lambda r: r.effects, robot, (jaxcal.Backlash(1, 50.0),)))
+
+
 def test_compensator_derivatives(fanuc):
     robot, tree = fanuc
     q = jnp.radians(jnp.array([20.0, 40.0, -10.0, 30.0, 50.0, 10.0]))

@@ -258,6 +258,7 @@ def fit_markers(
     """A calibration's fit, traceable (Monte-Carlo trials map it): `table`'s parameters
     where `mask` is 1, from `robot`'s values, to the seen markers `target` `(m, 3)` (m; at
     `rows`, `markers` of `observations`) at the poses `x`, σ `(m,)`."""
+
     def jacobian(p):
         return _jacobian(robot, table, p, x, deflection, rows, markers)
 

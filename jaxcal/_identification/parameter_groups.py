@@ -25,6 +25,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -156,7 +157,12 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
         elif g == "spring-laws":
             for k, law in enumerate(robot.laws):
                 for key, field, factor in law.keys:
-                    value = abs(float(getattr(law, field)))
+                    try:
+                        value = abs(float(getattr(law, field)))
+                    except jax.errors.ConcretizationTypeError:
+                        # Traced (a table built inside a transformation): the law's
+                        # typical step, as for a zero value.
+                        value = 0.0
                     typical = max(value * 1e-2, 1e-6) if value > 0 else law.typical.get(field, 1e-6)
                     out.append(
                         Parameter(

@@ -11,8 +11,10 @@ from ._path import (
 from ._plot import plot_compensation as plot_compensation
 from ._solve import (
     RowCompensation as RowCompensation,
-    compensate_row as compensate_row,
-    landing_error as landing_error,
     pose_error as pose_error,
 )
-from ._tree import compensate_tree_row as compensate_tree_row
+from ._tree import (
+    compensate_row as compensate_row,
+    compensate_tree_row as compensate_tree_row,
+    landing_error as landing_error,
+)

@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import TextIO
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -27,9 +26,10 @@ from .._markers import MarkerData, joint_units, marker_columns, read_markers
 from .._model.tree import TreeRobot
 from .._precision import require_float64
 from .._robot import Robot
+from .._robot_tree import as_tree
 from .._solution import RESULTS, messages
-from ._solve import RowCompensation, compensate_row
-from ._tree import TARGETS, tool_marker, tree_rows
+from ._solve import RowCompensation
+from ._tree import TARGETS, robot_covariance, tool_marker, tree_rows
 
 __all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
 
@@ -134,16 +134,6 @@ def read_path(path: str | Path, robot: Robot | TreeRobot) -> Dataset | MarkerDat
     return read_dataset(path, robot, require_deflection=False, ignore_deflection=True)
 
 
-@eqx.filter_jit
-def compensate_rows(robot, q, force, moment, covariance, max_cond, length_scale, tol):
-    one = lambda a, b, c: compensate_row(
-        robot, a, b, c, covariance, max_cond=max_cond, length_scale=length_scale, tol=tol
-    )
-    if moment is None:
-        return jax.vmap(lambda a, b: one(a, b, None))(q, force)
-    return jax.vmap(one)(q, force, moment)
-
-
 def compensate(
     robot: Robot | TreeRobot,
     path: Dataset | MarkerData,
@@ -203,22 +193,21 @@ def compensate(
         )
     if not isinstance(path, Dataset):
         raise ValueError("path: the FANUC-form robot's path is read by read_path(file, robot)")
-    cov = None
+    tree = as_tree(robot)
+    table, cov = (), None
     if isinstance(calibration, Calibration):
-        cov = calibration.full_covariance(robot)
+        table, cov = robot_covariance(robot, tree, calibration.full_covariance(robot))
     elif calibration is not None:
-        cov = jnp.asarray(calibration)
-        P = len(robot.parameter_names)
-        if cov.shape != (P, P):
-            raise ValueError(f"calibration covariance must be {P}x{P}, got {cov.shape}")
+        table, cov = robot_covariance(robot, tree, jnp.asarray(calibration))
+    q = jnp.asarray(path.q)
     moment = path.moment if path.has_moments else None
     settings = (float(max_cond), float(length_scale), float(tol))
     rows = map_in_chunks(
-        lambda q, f, m: compensate_rows(robot, q, f, m, cov, *settings),
+        lambda q, f, m: tree_rows(tree, q, f, m, cov, table, 0, "gravity", *settings),
         len(path),
         chunk_rows(),
-        path.q,
-        path.force,
+        q,
+        jnp.asarray(path.force),
         moment,
     )
     limits = tuple((float(lo), float(hi)) for lo, hi in np.rad2deg(np.asarray(robot.joint_limits)))

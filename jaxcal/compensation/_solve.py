@@ -9,11 +9,12 @@ predicts; the **compensated** angles `qc` solve
     pT(qc, θ*(qc, F, M)) = pT(q, θ*(q, 0)),   R(qc, θ*(qc, F, M)) = R(q, θ*(q, 0)),
 
 six equations in six unknowns, solved by an optimistix fixed-point iteration with the
-rigid-body Jacobian (see `compensate_row`). The equilibrium inside is the full static
-equilibrium (eq. 17), differentiated by the implicit function theorem (`implicit_step`),
-and warm-started at the loaded equilibrium of the programmed angles.
+rigid-body Jacobian (`corrected_commands`). The equilibrium inside is the full static
+equilibrium (eq. 17) of the one general model (`_tree.py`), differentiated by the
+implicit function theorem.
 
-Functions here handle one row; `compensate` vmaps them over a path.
+This module holds the problem's parts that do not depend on the model: the iteration,
+the pose error, the row's outcome and its refusal reasons.
 """
 
 from __future__ import annotations
@@ -25,25 +26,14 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._linalg.dense import eigvalsh, lu_factor, lu_solve
-from .._model.equilibrium import (
-    batch_roots,
-    implicit_step,
-    solve_equilibrium,
-    stop_gradients,
-    tool_pose,
-)
-from .._parameters import get_parameters, set_parameters
-from .._robot import Robot
 from .._solution import RESULTS
 
 __all__ = [
     "RowCompensation",
-    "compensate_row",
     "corrected_commands",
     "condition_number",
     "row_outcome",
     "pose_error",
-    "landing_error",
 ]
 
 #: Step budget of the fixed-point iteration (it converges in 4–6 steps).
@@ -90,51 +80,6 @@ def pose_error(
     W = R @ R_target.T
     w = 0.5 * jnp.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
     return p - p_target, w
-
-
-def landing_error(
-    robot: Robot,
-    qc: Float[Array, 6],
-    q: Float[Array, 6],
-    force: Float[Array, 3],
-    moment: Float[Array, 3] | None = None,
-) -> tuple[Float[Array, 3], Bool[Array, ""]]:
-    """Where the tool of `robot` lands when commanded `qc` under the process wrench,
-    against its target (the tool point at the programmed angles `q` under gravity
-    alone), m in the base frame; and whether both equilibria converged to stable states.
-
-    With `robot` the robot as built and `qc` the angles a calibrated model computed
-    (`compensate_row`), this is the error that compensation leaves on the real robot (a
-    simulation study's measure); with `qc = q`, the error without compensation. One row:
-    `jax.vmap` over a path. Does not raise.
-    """
-    dtype = jnp.result_type(q, robot.compliance)
-    q, qc = jnp.asarray(q, dtype), jnp.asarray(qc, dtype)
-    target = solve_equilibrium(robot, q, jnp.zeros(3, dtype), None)
-    landed = solve_equilibrium(robot, qc, jnp.asarray(force, dtype), moment)
-    p_t, _ = tool_pose(robot, q, target.x)
-    p_c, _ = tool_pose(robot, qc, landed.x)
-    ok = (target.result == RESULTS.successful) & (landed.result == RESULTS.successful)
-    return p_c - p_t, ok
-
-
-def _one_root(robot, q, force, moment, x0=None):
-    x, ok = batch_roots(
-        stop_gradients(robot),
-        jax.lax.stop_gradient(q)[None],
-        jax.lax.stop_gradient(force)[None],
-        None if moment is None else jax.lax.stop_gradient(moment)[None],
-        None if x0 is None else jax.lax.stop_gradient(x0)[None],
-    )
-    return x[0], ok[0]
-
-
-def _loaded_pose(robot, force, moment, x0, qc):
-    """Tool pose at `qc` under the wrench, differentiable in `qc` and the robot."""
-    xr, conv = _one_root(robot, qc, force, moment, x0)
-    x, ok = implicit_step(robot, qc, force, moment, xr, conv, symmetric=moment is None)
-    p, R = tool_pose(robot, qc, x)
-    return p, R, ok
 
 
 def corrected_commands(rigid_pose, loaded_pose, args, q, target, first, length_scale):
@@ -228,104 +173,3 @@ def row_outcome(
     result = RESULTS.where(cond > max_cond, RESULTS.singular, result)
     result = RESULTS.where(roots_ok, result, RESULTS.equilibrium_failed)
     return RowCompensation(qc, deflection, rotation, res_p, res_r, cond, res_cov, res_std, result)
-
-
-def compensate_row(
-    robot: Robot,
-    q: Float[Array, 6],
-    force: Float[Array, 3],
-    moment: Float[Array, 3] | None = None,
-    covariance: Float[Array, "P P"] | None = None,
-    *,
-    max_cond: float = 500.0,
-    length_scale: float = 1.0,
-    tol: float = 1e-8,
-) -> RowCompensation:
-    """Compensated joint angles for one row (see the module docstring).
-
-    **Arguments**
-
-    - `q`: programmed motor angles (rad); `force` (N) and `moment` (N·m): process
-      wrench at the tool point, base frame (gravity always acts).
-    - `covariance`: covariance of the robot's physical parameters (user units, the order
-      of `robot.parameter_names`) to propagate into `res_std`.
-    - `max_cond`: refuse the row above this condition number of the arm's Jacobian at
-      the loaded link-side angles (near a singularity). Typical rows are at 3–30; a
-      wrist within 0.06° of φ5 = 0 is above 1000.
-    - `length_scale`: m per rad in the condition number (positions over angles).
-    - `tol`: a row is refused as out of reach if the verified residual exceeds this
-      (m for the position, rad for the orientation).
-
-    Never raises on values: check `result` (for use under `jax.vmap`).
-    """
-    dtype = jnp.result_type(q, robot.compliance)
-    q = jnp.asarray(q, dtype)
-    force = jnp.asarray(force, dtype)
-    zero = jnp.zeros(3, dtype)
-    sym = moment is None
-    # Roots without derivatives, then one implicit step each, so that the target and
-    # the deflection move with the robot's parameters by the implicit function theorem.
-    xu0, ok_u = _one_root(robot, q, zero, None)
-    xl0, ok_l = _one_root(robot, q, force, moment, xu0)
-    x_u, _ = implicit_step(robot, q, zero, None, xu0, ok_u)
-    x_l, _ = implicit_step(robot, q, force, moment, xl0, ok_l, symmetric=sym)
-    p_t, R_t = tool_pose(robot, q, x_u)
-    p_l, R_l = tool_pose(robot, q, x_l)
-    deflection, rotation = pose_error(p_t, R_t, p_l, R_l)
-    # The first-order correction of the deflection already computed at the programmed
-    # angles starts the iteration: its first step, without its equilibrium solve.
-    xl_frozen = jax.lax.stop_gradient(x_l)
-    qc, solved, J = corrected_commands(
-        lambda y: tool_pose(robot, y, xl_frozen),
-        lambda qc, a: _loaded_pose(a[0], a[1], a[2], a[3], qc)[:2],
-        (robot, force, moment, xl_frozen),
-        q,
-        (p_t, R_t),
-        (deflection, rotation),
-        length_scale,
-    )
-
-    # Verify with an independent solve from zero deflection, with the stability check.
-    eq = solve_equilibrium(stop_gradients(robot), jax.lax.stop_gradient(qc), force, moment)
-    p_c, R_c = tool_pose(robot, qc, eq.x)
-    res_p, res_r = pose_error(p_t, R_t, p_c, R_c)
-    res_p, res_r = jax.lax.stop_gradient(res_p), jax.lax.stop_gradient(res_r)
-    res_cov = jnp.full((3, 3), jnp.nan, dtype)
-    if covariance is not None:
-        res_cov = _residual_covariance(robot, q, qc, force, moment, xu0, eq.x, covariance)
-    return row_outcome(
-        qc,
-        J,
-        solved,
-        deflection,
-        rotation,
-        (res_p, res_r),
-        eq.converged & eq.stable,
-        ok_u & ok_l,
-        robot.joint_limits,
-        res_cov,
-        max_cond=max_cond,
-        tol=tol,
-    )
-
-
-def _residual_covariance(robot, q, qc, force, moment, x_u, x_c, covariance):
-    """Covariance (m²) of the tool-point residual that parameter errors of covariance
-    `covariance` leave at fixed `qc`: `G Σ Gᵀ`, with `G` the autodiff Jacobian of
-    `pT(qc, F; p) − pT(q, 0; p)` (both equilibria move with `p`). `x_u` and `x_c` are
-    the roots already solved at `q` (gravity only) and at `qc` (loaded, verified):
-    the implicit steps differentiate them without solving again."""
-    p0 = get_parameters(robot)
-    zero = jnp.zeros_like(force)
-    ok = jnp.array(True)
-    x_u, x_c = jax.lax.stop_gradient((x_u, x_c))
-
-    def r(p):
-        rb = set_parameters(robot, p)
-        xc, _ = implicit_step(rb, qc, force, moment, x_c, ok, symmetric=moment is None)
-        xu, _ = implicit_step(rb, q, zero, None, x_u, ok)
-        return tool_pose(rb, qc, xc)[0] - tool_pose(rb, q, xu)[0]
-
-    G = jax.jacfwd(r)(p0)
-    C = G @ covariance @ G.T
-    return 0.5 * (C + C.T)

@@ -19,6 +19,9 @@ is the covariance of the tool point's residual that it leaves at the compensated
 values, to first order (`G Σ Gᵀ`, `G` the autodiff Jacobian of the loaded tool point at
 `qc` minus the target, both equilibria moving with the parameters); without, NaN.
 
+The FANUC-form `Robot` is compensated on its tree (`as_tree`): `compensate_row` and
+`landing_error` take it as they always did, its covariance in user units.
+
 Functions here handle one row; `compensate` vmaps them over a path.
 """
 
@@ -27,15 +30,26 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
-from .._identification.parameter_groups import Parameter, get_vector, set_vector
+from .._identification.parameter_groups import Parameter, get_vector, parameter_table, set_vector
 from .._model.tree import TreeRobot
 from .._model.tree_kinematics import marker_index, marker_pose
 from .._model.tree_statics import tree_equilibrium
+from .._parameters import tree_parameter_names
+from .._robot import Robot
+from .._robot_tree import as_tree
 from ._solve import RowCompensation, corrected_commands, pose_error, row_outcome
 
-__all__ = ["TARGETS", "compensate_tree_row", "tool_marker", "tree_rows"]
+__all__ = [
+    "TARGETS",
+    "compensate_row",
+    "compensate_tree_row",
+    "landing_error",
+    "robot_covariance",
+    "tool_marker",
+    "tree_rows",
+]
 
 #: Pose equations of a tool (position and orientation): the fewest active joints a
 #: robot needs to be compensated.
@@ -147,6 +161,96 @@ def compensate_tree_row(
         max_cond=max_cond,
         tol=tol,
     )
+
+
+def robot_covariance(
+    robot: Robot, tree: TreeRobot, covariance: Float[Array, "p p"]
+) -> tuple[tuple[Parameter, ...], Float[Array, "p p"]]:
+    """The parameters of `tree` (`as_tree(robot)`) that `robot`'s physical parameters
+    are, and `covariance` (user units, the order of `robot.parameter_names`) in SI."""
+    names = tree_parameter_names(robot)
+    p = len(names)
+    if jnp.shape(covariance) != (p, p):
+        raise ValueError(f"calibration covariance must be {p}x{p}, got {jnp.shape(covariance)}")
+    by_name = {t.name: t for t in parameter_table(tree, ("joint-compliance", "spring-laws"))}
+    factor = jnp.asarray([f for _, f in names])
+    cov = factor[:, None] * jnp.asarray(covariance) * factor[None, :]
+    return tuple(by_name[n] for n, _ in names), cov
+
+
+def compensate_row(
+    robot: Robot,
+    q: Float[Array, 6],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+    covariance: Float[Array, "P P"] | None = None,
+    *,
+    max_cond: float = 500.0,
+    length_scale: float = 1.0,
+    tol: float = 1e-8,
+) -> RowCompensation:
+    """Compensated joint angles for one row of the FANUC-form `robot`: its tree's
+    (`compensate_tree_row` of `as_tree(robot)`, the tool point as the tool).
+
+    **Arguments**
+
+    - `q`: programmed motor angles (rad); `force` (N) and `moment` (N·m): process
+      wrench at the tool point, base frame (gravity always acts).
+    - `covariance`: covariance of the robot's physical parameters (user units, the order
+      of `robot.parameter_names`) to propagate into `res_std`.
+    - `max_cond`: refuse the row above this condition number of the arm's Jacobian at
+      the loaded link-side angles (near a singularity). Typical rows are at 3–30; a
+      wrist within 0.06° of φ5 = 0 is above 1000.
+    - `length_scale`: m per rad in the condition number (positions over angles).
+    - `tol`: a row is refused as out of reach if the verified residual exceeds this
+      (m for the position, rad for the orientation).
+
+    Never raises on values: check `result` (for use under `jax.vmap`).
+    """
+    tree = as_tree(robot)
+    table, cov = (), None
+    if covariance is not None:
+        table, cov = robot_covariance(robot, tree, covariance)
+    return compensate_tree_row(
+        tree,
+        q,
+        force,
+        moment,
+        cov,
+        table=table,
+        max_cond=max_cond,
+        length_scale=length_scale,
+        tol=tol,
+    )
+
+
+def landing_error(
+    robot: Robot | TreeRobot,
+    qc: Float[Array, " n"],
+    q: Float[Array, " n"],
+    force: Float[Array, 3],
+    moment: Float[Array, 3] | None = None,
+    *,
+    at: int | str = 0,
+) -> tuple[Float[Array, 3], Bool[Array, ""]]:
+    """Where the tool (marker `at` of a tree robot) lands when commanded `qc` under the
+    process wrench, against its target (the tool at the programmed angles `q` under
+    gravity alone), m in the base frame; and whether both equilibria converged.
+
+    With `robot` the robot as built and `qc` the angles a calibrated model computed
+    (`compensate_row`), this is the error that compensation leaves on the real robot (a
+    simulation study's measure); with `qc = q`, the error without compensation. One row:
+    `jax.vmap` over a path. Does not raise for values.
+    """
+    tree = as_tree(robot) if isinstance(robot, Robot) else robot
+    i = tool_marker(tree, at)
+    dtype = jnp.result_type(q, tree.compliance)
+    q, qc = jnp.asarray(q, dtype), jnp.asarray(qc, dtype)
+    target = tree_equilibrium(tree, q)
+    landed = tree_equilibrium(tree, qc, force=jnp.asarray(force, dtype), moment=moment, at=i)
+    p_t = marker_pose(tree, q, target.phi, i)[1]
+    p_c = marker_pose(tree, qc, landed.phi, i)[1]
+    return p_c - p_t, target.converged & landed.converged
 
 
 def _residual_covariance(robot, table, q, qc, force, moment, at, target, covariance):

@@ -54,7 +54,7 @@ from .._model.tree_kinematics import gravity_potential as gravity_potential
 from .._model.tree_statics import DERIVATIVE_RTOL as DERIVATIVE_RTOL
 from .._robot import URAD as URAD, G as G
 from .._solution import NAMES as NAMES, messages as messages
-from ..compensation._path import compensate_rows as compensate_rows
+from ..compensation._tree import robot_covariance as robot_covariance, tree_rows as tree_rows
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian
 from ..design._problem import problem_criteria as problem_criteria
