@@ -154,6 +154,11 @@ def compensate_tree_row(
         deflection,
         rotation,
         residual,
+        # Settled where converged: the fixed point φ = −κ ∂V/∂φ is attracting only where
+        # κ ∂²V/∂φ² has spectral radius below 1, where the potential's Hessian
+        # κ⁻¹ + ∂²V/∂φ² is positive definite: a stable equilibrium (under a force). Not
+        # conversely: a stable equilibrium with an eigenvalue of κ ∂²V/∂φ² above 1 (far
+        # more compliant springs than an industrial arm's) is not reached.
         eq.converged,
         free.converged & loaded.converged,
         robot.joint_limits,
