@@ -98,10 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from ..montecarlo._study import monte_carlo
     from .tree import given_as_tree
 
-    if given_as_tree(args, "set the study's calibration"):
-        from .montecarlo_tree import montecarlo_tree
-
-        return montecarlo_tree(args)
+    tree = given_as_tree(args, "set the study's calibration")
     if args.processes < 1:
         raise ValueError(f"--processes must be at least 1, got {args.processes}")
     if args.processes > 1 and "JAXCAL_COORDINATOR" not in os.environ:
@@ -112,6 +109,10 @@ def run(args: argparse.Namespace) -> int:
             raise
     if "JAXCAL_COORDINATOR" in os.environ:
         join_processes()
+    if tree:
+        from .montecarlo_tree import montecarlo_tree
+
+        return montecarlo_tree(args)
     if args.noise_mm is not None and not args.noise_mm > 0:
         raise ValueError(f"--noise-mm must be positive, got {args.noise_mm}")
     if args.trials < 1:
@@ -174,6 +175,10 @@ def _worker_argv(args: argparse.Namespace) -> list[str]:
             argv += [flag, repr(value)]
     for name in args.fix:
         argv += ["--fix", name]
+    if args.params is not None:
+        argv += ["--params", args.params]
+    for prior in args.prior:
+        argv += ["--prior", prior]
     for flag, on in (
         ("--json", args.json),
         ("--no-progress", args.no_progress),

@@ -19,7 +19,7 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
     from ..montecarlo._tree import TREE_METHODS, tree_study
 
     refuse_options(
-        (("--processes", args.processes != 1), ("--fix", bool(args.fix))),
+        (("--fix", bool(args.fix)),),
         "for the FANUC form; a tree robot's study takes --params GROUPS and --prior (as identify)",
     )
     if args.method not in TREE_METHODS:
@@ -44,6 +44,10 @@ def montecarlo_tree(args: argparse.Namespace) -> int:
     )
     d = {"robot": robot.name, "plan": args.design, "seed": args.seed, "priors": priors}
     d.update(st.to_dict())
+    import jax
+
+    if jax.process_index() != 0:
+        return 0  # one job, one report: process 0's
     if args.json:
         print_json(d)
         return 0
