@@ -158,6 +158,22 @@ def test_as_tree_is_the_file_forms_tree_and_traceable(changes):
     )
     _leaves_equal(jaxcal.as_tree(moved), expected, rtol=1e-15)
     _leaves_equal(eqx.filter_jit(jaxcal.as_tree)(moved), expected, rtol=1e-15)
+    # The parameter table of a tree built inside a trace (a row's covariance under jit)
+    # names the same parameters; a law's step is then its typical size.
+    groups = ("joint-compliance", "spring-laws")
+    traced = []
+
+    def table_of(r):
+        traced.extend(jaxcal.parameter_table(jaxcal.as_tree(r), groups))
+        return r.compliance
+
+    jax.make_jaxpr(table_of)(robot)
+    table = jaxcal.parameter_table(tree, groups)
+    assert [p[:5] for p in traced] == [p[:5] for p in table]
+    for p in traced:
+        if p.group == "spring-laws":
+            law = tree.laws[int(p.field.split(".")[1])]
+            assert p.scale == law.typical.get(p.field.split(".")[2], 1e-6)
     with pytest.raises(ValueError, match="model effects"):
         jaxcal.as_tree(eqx.tree_at(lambda r: r.effects, robot, (jaxcal.Backlash(1, 50.0),)))
 
