@@ -199,19 +199,28 @@ def compensate(
         table, cov = robot_covariance(robot, tree, calibration.full_covariance(robot))
     elif calibration is not None:
         table, cov = robot_covariance(robot, tree, jnp.asarray(calibration))
-    q = jnp.asarray(path.q)
     moment = path.moment if path.has_moments else None
-    settings = (float(max_cond), float(length_scale), float(tol))
-    rows = map_in_chunks(
-        lambda q, f, m: tree_rows(tree, q, f, m, cov, table, 0, "gravity", *settings),
-        len(path),
-        chunk_rows(),
-        q,
-        jnp.asarray(path.force),
-        moment,
+    rows = _rows(
+        tree, path.q, path.force, moment, table, cov, 0, "gravity", max_cond, length_scale, tol
     )
     limits = tuple((float(lo), float(hi)) for lo, hi in np.rad2deg(np.asarray(robot.joint_limits)))
     return Compensation(path=path, rows=rows, max_cond=float(max_cond), limits_deg=limits)
+
+
+def _rows(
+    tree, q, force, moment, table, cov, at, target, max_cond, length_scale, tol
+) -> RowCompensation:
+    """`tree_rows` of a path (moment `None`: none) in calls of `chunk_rows()` rows: one
+    compiled program for every path length."""
+    settings = (float(max_cond), float(length_scale), float(tol))
+    return map_in_chunks(
+        lambda a, b, c: tree_rows(tree, a, b, c, cov, table, at, target, *settings),
+        len(q),
+        chunk_rows(),
+        jnp.asarray(q),
+        jnp.asarray(force),
+        None if moment is None else jnp.asarray(moment),
+    )
 
 
 def _compensate_tree(
@@ -233,17 +242,9 @@ def _compensate_tree(
         raise ValueError(
             f"calibration covariance must be {len(table)}x{len(table)}, got {cov.shape}"
         )
-    q = jnp.asarray(path.q)
-    force = jnp.zeros_like(q[:, :3]) if path.force is None else jnp.asarray(path.force)
-    moment = None if path.moment is None else jnp.asarray(path.moment)
-    settings = (float(max_cond), float(length_scale), float(tol))
-    rows = map_in_chunks(
-        lambda q, f, m: tree_rows(robot, q, f, m, cov, table, at, target, *settings),
-        len(path),
-        chunk_rows(),
-        q,
-        force,
-        moment,
+    force = np.zeros((len(path.q), 3)) if path.force is None else path.force
+    rows = _rows(
+        robot, path.q, force, path.moment, table, cov, at, target, max_cond, length_scale, tol
     )
     unit = joint_units(robot)
     lim = np.asarray(robot.joint_limits) * unit[:, None]
