@@ -213,6 +213,10 @@ def _rows(
     """`tree_rows` of a path (moment `None`: none) in calls of `chunk_rows()` rows: one
     compiled program for every path length."""
     settings = (float(max_cond), float(length_scale), float(tol))
+    # A spring law's scale follows its value, so each calibration's table differs there;
+    # the propagation does not use it, and a table without it (static to `tree_rows`)
+    # keeps one compiled program for every calibration of a robot.
+    table = tuple(p._replace(scale=1.0) for p in table)
     return map_in_chunks(
         lambda a, b, c: tree_rows(tree, a, b, c, cov, table, at, target, *settings),
         len(q),
