@@ -1,5 +1,5 @@
 """Compliance error compensation of robots given as kinematic trees: the FANUC as a tree,
-calibrated and saved, gives the template model's commands and predicted residual std
+calibrated and saved, gives the FANUC-form robot's commands and predicted residual std
 (command line, same path file, same springs and covariance), a redundant robot
 (Agile Justin, 19 joints) gets the least-norm correction that lands its tool marker,
 on a pose taught under gravity or planned on the rigid model, and what a tree robot
@@ -56,16 +56,17 @@ def calibrated_tree(tmp_path_factory):
     return cal, json.loads(out.getvalue())
 
 
-def test_fanuc_as_a_tree_gives_the_template_models_commands_and_res_std(
+def test_the_fanuc_tree_file_gives_the_fanuc_forms_commands_and_res_std(
     calibrated_tree, tmp_path, capsys
 ):
     """The saved tree calibration compensates a path from the command line (its
-    covariance read back from the file); the template model with the same springs and
-    the same covariance gives the same commands and predicted residual std. The two
-    models agree to 2 nm in deflection (tests/test_quasi_serial.py), which moves a
-    command by at most ~2e-9 m over the arm's ≥ 0.5 m lever: 4e-9 rad, 2.3e-7 deg; the
-    files are compared at 3e-7 deg, the deflections at 2e-6 mm (their last digit), the
-    stds (the same first-order propagation through either model) at 1e-4 relative."""
+    covariance read back from the file); the FANUC-form robot with the same springs and
+    the same covariance (its tree `as_tree`'s, equal to the exported file's) gives the same
+    commands and predicted residual std. The routes differ in how the springs and the
+    covariance reach the tree (a file's numbers against the FANUC form's user units) and
+    in the file's printed digits: the commands are compared at 3e-7 deg (what 2 nm at the
+    arm's ≥ 0.5 m lever moves a command), the deflections at 2e-6 mm (their last digit),
+    the stds at 1e-4 relative."""
     cal, fitted = calibrated_tree
     saved = json.loads(cal.read_text())["calibration"]["covariance"]
     assert saved["parameters"] == [f"J{i}.k_theta" for i in range(1, 7)]
@@ -76,15 +77,15 @@ def test_fanuc_as_a_tree_gives_the_template_models_commands_and_res_std(
     s = json.loads(capsys.readouterr().out)
     assert s["compensated"] == len(ROWS) and s["max_residual_um"] < 1e-3 and s["calibrated"]
     rows = _commands(out)
-    # The template model with the tree's springs and covariance (k1..k6; Kc, s0 held).
+    # The FANUC-form robot with the tree's springs and covariance (k1..k6; Kc, s0 held).
     robot = jaxcal.load_robot()
     value = {p["name"]: p["value"] for p in fitted["parameters"]}
     p = np.asarray(jaxcal.get_parameters(robot)).copy()
     p[:6] = [value[f"J{i}.k_theta"] for i in range(1, 7)]
     cov = np.zeros((len(p), len(p)))
     cov[:6, :6] = saved["matrix"]  # µrad/(N·m) in both
-    template = jaxcal.set_parameters(robot, jnp.asarray(p))
-    comp = jaxcal.compensate(template, jaxcal.read_path(path, template), jnp.asarray(cov))
+    fanuc = jaxcal.set_parameters(robot, jnp.asarray(p))
+    comp = jaxcal.compensate(fanuc, jaxcal.read_path(path, fanuc), jnp.asarray(cov))
     qc, d = np.degrees(np.asarray(comp.rows.qc)), np.asarray(comp.rows.deflection) * 1e3
     std = np.asarray(comp.rows.res_std) * 1e3
     for r, row in enumerate(rows):
