@@ -187,6 +187,25 @@ def test_jit_vmap_consistency(justin, data):
     assert ok.all()
 
 
+def test_predictions_of_every_size_share_one_program_and_keep_each_rows_own(justin, data, caplog):
+    # `predicted_markers` runs one program on fixed-size calls (the last padded): the
+    # BLOCK rows are two calls, and rows 60-69 alone are another size of data set, which
+    # compiles nothing new. They get their own rows of the whole: the same operations,
+    # to what a batch may change, where the fixed point stops (1e-12 rad, times arms of
+    # about 1 m). A row mixed up with another, or a padding row kept, would be off by
+    # millimetres.
+    whole, ok = jaxcal.predicted_markers(justin, data.subset(np.arange(BLOCK)))
+    with jax.log_compiles(True), caplog.at_level("WARNING", logger="jax"):
+        part, part_ok = jaxcal.predicted_markers(justin, data.subset(np.arange(60, 70)))
+        jax.jit(lambda x: x + 1, inline=False)(jnp.zeros(3))  # a compile is logged here
+    logged = [r.getMessage() for r in caplog.records]
+    assert any("<lambda>" in m for m in logged)
+    assert not any("predict_rows" in m for m in logged), logged
+    assert part.shape == (10, *whole.shape[1:])
+    np.testing.assert_allclose(part, whole[60:70], rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(part_ok, ok[60:70])
+
+
 def test_jacobian_in_calls_of_a_fixed_size_keeps_each_rows_own(justin, data):
     # `scaled_jacobian` runs one program on fixed-size calls (the last padded): the
     # BLOCK rows' Jacobian is two calls. Rows 60-69, alone in a call of their own, get

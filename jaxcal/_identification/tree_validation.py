@@ -9,6 +9,7 @@ from typing import NamedTuple
 import equinox as eqx
 import numpy as np
 
+from .._batching import map_in_chunks
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
@@ -19,13 +20,23 @@ __all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_m
 
 _markers_of = eqx.filter_jit(predict_rows)
 
+#: Poses per call of `predicted_markers`: one compiled program for a robot's data of
+#: every size (held-out sets, folds, subsets), the last call padded with copies of the
+#: first pose, instead of one program per size (about 1 s of compile each).
+PREDICTION_CHUNK = 64
+
 
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
     """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, under
     their loads if they have any (for deflection data, the markers' displacements under
     the loads), and `(n,)` whether each equilibrium converged."""
-    y, ok = _markers_of(robot, poses(data), data.deflection)
-    return np.asarray(y), np.asarray(ok)
+    x = poses(data)
+    return map_in_chunks(
+        lambda *pose: _markers_of(robot, pose, data.deflection),
+        x[0].shape[0],
+        PREDICTION_CHUNK,
+        *x,
+    )
 
 
 def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
