@@ -28,7 +28,7 @@ from pathlib import Path
 
 import jax
 
-from ._exported import set_export_directory
+from ._exported import export_directory, set_export_directory
 
 __all__ = [
     "cache_dir",
@@ -102,6 +102,10 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | No
             stacklevel=2,
         )
         return None
+    if _active(target):
+        # Already on here (a second command in one process): the programs loaded from
+        # it stay loaded, rather than being read, lowered and fetched again.
+        return target
     jax.config.update("jax_compilation_cache_dir", str(target))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
@@ -166,6 +170,12 @@ def _install_atomic_entries(target: Path) -> None:
     with jax_cache._cache_initialized_mutex:
         jax_cache._cache = AtomicFileCache(target)
         jax_cache._cache_initialized = True
+
+
+def _active(target: Path) -> bool:
+    """Whether this process already keeps its programs in `target`."""
+    here = jax.config.jax_compilation_cache_dir  # pyright: ignore[reportAttributeAccessIssue]
+    return here == str(target) and export_directory() == target
 
 
 def _reset() -> None:

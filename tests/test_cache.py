@@ -148,3 +148,31 @@ def test_an_entry_is_written_whole_or_not_at_all(tmp_path):
     again = _write("-", env)
     assert "Error reading" not in again.stderr
     assert again.stdout == first.stdout
+
+
+def _doubled_plus_one(x):
+    return 2.0 * x + 1.0
+
+
+def test_a_second_command_keeps_the_programs_already_loaded(caplog):
+    # Each command turns the cache on (`jaxcal.internal.cli.main`); in one process (a
+    # notebook, the tests) the second finds it on in the same directory, and the stored
+    # programs it has loaded stay loaded: not read, lowered and fetched again.
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from jaxcal.internal import exported
+
+    f = exported(eqx.filter_jit(_doubled_plus_one))
+    x = jnp.arange(3.0)
+    target = jaxcal.enable_compilation_cache()  # the test run's own directory
+    assert target is not None
+    f(x)
+    assert jaxcal.enable_compilation_cache() == target
+    with jax.log_compiles(True), caplog.at_level("WARNING", logger="jax"):
+        assert f(x).tolist() == [1.0, 3.0, 5.0]
+        jax.jit(lambda y: y - 1, inline=False)(jnp.zeros(2))  # a compile is logged here
+    logged = [r.getMessage() for r in caplog.records]
+    assert any("<lambda>" in m for m in logged)
+    assert not any("_doubled_plus_one" in m for m in logged), logged
