@@ -4,6 +4,7 @@ explicitly (the library never flips global JAX config on import)."""
 import contextlib
 import gc
 import os
+import re
 import resource
 import shutil
 import signal
@@ -206,6 +207,29 @@ def optimised_test():
     """LLVM's optimisations on for one test's compiles: one whose programs run long."""
     with _optimisations_on():
         yield
+
+
+@contextlib.contextmanager
+def _compiled(caplog):
+    names: list[str] = []
+    start = len(caplog.records)
+    with jax.log_compiles(True), caplog.at_level("WARNING", logger="jax"):
+        yield names
+        # A program never compiled before (a new function): its compile must be logged,
+        # or the log is not where it is read from and an empty list would prove nothing.
+        jax.jit(lambda x: x + 1, inline=False)(jax.numpy.zeros(1))
+    for r in caplog.records[start:]:
+        names += re.findall(r"^Compiling jit\((.+?)\) with", r.getMessage())
+    if not names or names[-1] != "<lambda>":
+        raise AssertionError(f"XLA's compile log was not captured: {names}")
+    names.pop()
+
+
+@pytest.fixture
+def compiled(caplog):
+    """`with compiled() as names:` the names of the programs compiled inside the block
+    (XLA's compile log; a persistent-cache hit is logged too), filled when it ends."""
+    return lambda: _compiled(caplog)
 
 
 DATA = Path(__file__).parent / "data"
