@@ -126,3 +126,14 @@ def test_advice_states_when_no_plan_within_the_limit_does(robot, one_level):
         jaxcal.advise_measurements(robot, one_level, ("k9",))
     with pytest.raises(ValueError, match="threshold must be positive"):
         jaxcal.advise_measurements(robot, one_level, ("Kc",), threshold=0.0)
+
+
+def test_held_parameters_are_refitted_by_the_same_program(robot, data_dir, compiled):
+    # Holding what the data leave undetermined refits with one more parameter held
+    # each pass (Kc, then s0 on the example), by a traced mask: one compiled fit for
+    # every pass. (45 rows: a shape no other test fits, so its compile is this test's.)
+    data = jaxcal.read_dataset(data_dir / "example_calibration.csv", robot).subset(range(45))
+    with compiled() as names:
+        res = jaxcal.identify(robot, data, "nonlinear", undetermined="hold")
+    assert res.not_determined == ("Kc_N_per_m", "s0_m") and res.fixed == res.not_determined
+    assert names.count("fit_jit") == 1, names

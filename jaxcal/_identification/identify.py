@@ -30,7 +30,7 @@ from .._solution import messages
 from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
 from .method import METHODS, fit_jit, method_named
 from .methods import linear_columns
-from .result import THRESHOLD, IdentificationResult, resolve_name
+from .result import THRESHOLD, IdentificationResult, held_as_fixed, resolve_name
 
 __all__ = [
     "identify",
@@ -255,15 +255,26 @@ def identify(
             stacklevel=2,
         )
 
+    first = fixed
+
     def run(fixed: tuple[str, ...]) -> IdentificationResult:
-        settings: dict = {"free": tuple(n not in fixed for n in names)}
-        if method == "nonlinear":
+        # The nonlinear fit holds what the loop below adds by a traced mask: one compiled
+        # program for every pass (a cold `jaxcal identify` of the example, which holds
+        # Kc and then s0: 6.8 s, against 12.7 s with a compile per pass).
+        nonlinear = method == "nonlinear"
+        held = tuple(n for n in fixed if n not in first) if nonlinear else ()
+        settings: dict = {"free": tuple(n not in fixed or n in held for n in names)}
+        if nonlinear:
             loss = "huber" if robust else "l2"
             settings.update(loss=loss, huber_delta=float(huber_delta), max_steps=int(max_steps))
         solver = method_named(method, **settings)
+        mask = np.asarray([n in held for n in names], float)
 
         def fit(d: Dataset) -> IdentificationResult:
-            return _fit_stored(solver, solver.init(robot, d), d.deflection)
+            state = solver.init(robot, d)
+            if nonlinear:  # (an array in every pass, none held in the first)
+                state = dataclasses.replace(state, held=jax.numpy.asarray(mask))
+            return held_as_fixed(_fit_stored(solver, state, d.deflection), names, held)
 
         res = fit(data)
         if screen_gross:

@@ -136,6 +136,9 @@ class NonlinearState(eqx.Module):
     q_unique: Float[Array, "u 6"]
     inverse: Int[Array, " n"]
     mask: tuple[bool, ...] = eqx.field(static=True)
+    #: `(P,)` 0/1 over `robot.parameter_names`: free parameters held at the robot's
+    #: values besides (a traced choice: fits that hold different ones share a program).
+    held: Float[Array, " P"] | None = None
 
 
 class NonlinearMethod(AbstractMethod):
@@ -196,6 +199,7 @@ class NonlinearMethod(AbstractMethod):
             self.huber_delta,
             self.max_steps,
             moments,
+            state.held,
         )
 
 

@@ -156,15 +156,30 @@ def full_model_predictor(
     return predict
 
 
-def _to_physical(u, s0_fixed: bool, s0_ref):
-    """Internal vector `[k1..k6, Kc, Kc·s0]` → physical `[k1..k6, Kc, s0]`."""
+def _to_physical(u, s0_fixed: bool, s0_ref, s0_held=None):
+    """Internal vector `[k1..k6, Kc, Kc·s0]` → physical `[k1..k6, Kc, s0]`; `s0_held` (a
+    traced flag) holds s0 at `s0_ref` as `s0_fixed` does."""
     s0 = s0_ref if s0_fixed else u[7] / u[6]
+    if s0_held is not None:
+        s0 = jnp.where(s0_held, s0_ref, s0)
     return jnp.concatenate([u[:7], jnp.reshape(s0, (1,))])
 
 
 def nonlinear_with_groups(
-    robot, data, q_u, inv, free, loss, huber_delta, max_steps, moments: bool | None = None
+    robot,
+    data,
+    q_u,
+    inv,
+    free,
+    loss,
+    huber_delta,
+    max_steps,
+    moments: bool | None = None,
+    held=None,
 ):
+    """The nonlinear fit of the `free` parameters; `held` `(P,)` (traced 0/1, or `None`)
+    holds some of them at the robot's values too, in the same compiled program (their
+    estimate is then the start value, their covariance zero)."""
     if data.deflection is None:
         raise ValueError("data has no deflections to fit")
     mask = free_mask(robot, free)
@@ -176,7 +191,8 @@ def nonlinear_with_groups(
         # the covariance's linearisation holds; s0 and its variance follow by the delta
         # method (autodiff Jacobian of the map back).
         s0_fixed = not mask[7]
-        to_p = lambda u: _to_physical(u, s0_fixed, p0[7])
+        s0_held = None if held is None else held[7] > 0.5
+        to_p = lambda u: _to_physical(u, s0_fixed, p0[7], s0_held)
         u0 = p0.at[7].set(p0[6] * p0[7])
     else:
         to_p = lambda u: u
@@ -187,6 +203,7 @@ def nonlinear_with_groups(
         data.deflection,
         data.sigma,
         free=mask,
+        mask=None if held is None else 1.0 - held,
         loss=loss,
         huber_delta=huber_delta,
         max_steps=max_steps,

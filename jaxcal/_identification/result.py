@@ -9,6 +9,8 @@ order) and names carry their units (`k1_urad_per_Nm`, `Kc_N_per_m`, `s0_m`).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -348,6 +350,38 @@ def free_mask(robot: Robot, free) -> tuple[bool, ...]:
         return tuple(bool(f) for f in free)
     chosen = {resolve_name(str(f), names) for f in free}
     return tuple(n in chosen for n in names)
+
+
+def held_as_fixed(
+    res: IdentificationResult, names_all: tuple[str, ...], held: tuple[str, ...]
+) -> IdentificationResult:
+    """Host-side: `res` (one fit whose `held` parameters were held by a traced mask, at
+    their start values) as `make_result` gives a fit without them: those parameters
+    among `fixed` (in `names_all` order) with their values, and the degrees of freedom
+    and reduced χ² of the parameters left."""
+    if not held:
+        return res
+    keep = [i for i, n in enumerate(res.names) if n not in held]
+    est = res.estimate[np.asarray(keep, int)]
+    cov = res.covariance[np.ix_(keep, keep)]
+    std = jnp.sqrt(jnp.diag(cov))
+    value = dict(zip(res.fixed, np.asarray(res.fixed_values), strict=True))
+    value.update(zip(res.names, np.asarray(res.estimate), strict=True))
+    names = tuple(res.names[i] for i in keep)
+    fixed = tuple(n for n in names_all if n not in names)
+    dof = 3 * res.residuals.shape[0] - len(keep)
+    return dataclasses.replace(
+        res,
+        estimate=est,
+        covariance=cov,
+        std=std,
+        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
+        chi2_red=jnp.sum(res.standardized**2) / max(dof, 1),
+        fixed_values=jnp.asarray([value[n] for n in fixed], est.dtype),
+        names=names,
+        dof=dof,
+        fixed=fixed,
+    )
 
 
 def make_result(
