@@ -9,7 +9,7 @@ from typing import NamedTuple
 import equinox as eqx
 import numpy as np
 
-from .._batching import chunk_width, map_in_chunks
+from .._batching import map_in_chunks, rows_per_call
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
@@ -21,24 +21,16 @@ __all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_m
 _markers_of = eqx.filter_jit(predict_rows)
 
 
-def prediction_chunk() -> int:
-    """Poses per call of `predicted_markers`: one compiled program for a robot's data of
-    every size (held-out sets, folds, subsets), the last call padded with copies of the
-    first pose, instead of one program per size (about 1 s of compile each on a CPU).
-    A pose costs the same in any batch on a CPU; a GPU's call has a fixed cost, as for
-    the compensation's rows (`chunk_rows`)."""
-    return chunk_width(cpu=64, accelerator=4096)
-
-
 def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
     """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, under
     their loads if they have any (for deflection data, the markers' displacements under
     the loads), and `(n,)` whether each equilibrium converged."""
     x = poses(data)
+    # In calls of a fixed size: one program for held-out sets, folds and subsets alike.
     return map_in_chunks(
         lambda *pose: _markers_of(robot, pose, data.deflection),
         x[0].shape[0],
-        prediction_chunk(),
+        rows_per_call(),
         *x,
     )
 

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._batching import chunk_width, map_in_chunks
+from .._batching import map_in_chunks, rows_per_call
 from .._identification.calibration import Calibration
 from .._identification.elastogeometric import TreeCalibration
 from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_file, input_cells, read_dataset
@@ -32,15 +32,6 @@ from ._solve import RowCompensation
 from ._tree import TARGETS, robot_covariance, tool_marker, tree_rows
 
 __all__ = ["Compensation", "compensate", "read_path", "write_commands", "COMMAND_COLUMNS"]
-
-
-def chunk_rows() -> int:
-    """Rows per call of the compiled path program (paths are padded to a multiple, so
-    one compile serves every path length): on a CPU a row costs the same in any batch,
-    and 64 keeps the padding of short paths cheap. On a GPU a call costs a fixed ~20 ms
-    plus ~4 µs per row (H100): 4096 rows per call run a 10 000-row path 2.1 times as fast
-    as 1024, and a short one ~10 ms slower (benchmarks/README.md)."""
-    return chunk_width(cpu=64, accelerator=4096)
 
 
 #: Columns a commands file adds to the path's own. The model's uncompensated deflection
@@ -210,7 +201,7 @@ def compensate(
 def _rows(
     tree, q, force, moment, table, cov, at, target, max_cond, length_scale, tol
 ) -> RowCompensation:
-    """`tree_rows` of a path (moment `None`: none) in calls of `chunk_rows()` rows: one
+    """`tree_rows` of a path (moment `None`: none) in calls of `rows_per_call()` rows: one
     compiled program for every path length."""
     settings = (float(max_cond), float(length_scale), float(tol))
     # A spring law's scale follows its value, so each calibration's table differs there;
@@ -220,7 +211,7 @@ def _rows(
     return map_in_chunks(
         lambda a, b, c: tree_rows(tree, a, b, c, cov, table, at, target, *settings),
         len(q),
-        chunk_rows(),
+        rows_per_call(),
         jnp.asarray(q),
         jnp.asarray(force),
         None if moment is None else jnp.asarray(moment),
