@@ -262,18 +262,21 @@ def identify(
         # program for every pass (a cold `jaxcal identify` of the example, which holds
         # Kc and then s0: 6.8 s, against 12.7 s with a compile per pass).
         nonlinear = method == "nonlinear"
-        held = tuple(n for n in fixed if n not in first) if nonlinear else ()
-        settings: dict = {"free": tuple(n not in fixed or n in held for n in names)}
+        base = first if nonlinear else fixed
+        held = tuple(n for n in fixed if n not in base)
+        settings: dict = {"free": tuple(n not in base for n in names)}
+        held_mask = None
         if nonlinear:
             loss = "huber" if robust else "l2"
             settings.update(loss=loss, huber_delta=float(huber_delta), max_steps=int(max_steps))
+            # An array in every pass (zeros in the first): one program for all of them.
+            held_mask = jax.numpy.asarray([n in held for n in names], robot.compliance.dtype)
         solver = method_named(method, **settings)
-        mask = np.asarray([n in held for n in names], float)
 
         def fit(d: Dataset) -> IdentificationResult:
             state = solver.init(robot, d)
-            if nonlinear:  # (an array in every pass, none held in the first)
-                state = dataclasses.replace(state, held=jax.numpy.asarray(mask))
+            if held_mask is not None:
+                state = dataclasses.replace(state, held=held_mask)
             return held_as_fixed(_fit_stored(solver, state, d.deflection), names, held)
 
         res = fit(data)
