@@ -352,6 +352,12 @@ def free_mask(robot: Robot, free) -> tuple[bool, ...]:
     return tuple(n in chosen for n in names)
 
 
+def _std_and_ci95(est: Array, cov: Array) -> tuple[Array, Array]:
+    """The standard deviations of `cov`'s estimates and their two-sided 95 % intervals."""
+    std = jnp.sqrt(jnp.diag(cov))
+    return std, jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1)
+
+
 def held_as_fixed(
     res: IdentificationResult, names_all: tuple[str, ...], held: tuple[str, ...]
 ) -> IdentificationResult:
@@ -364,7 +370,7 @@ def held_as_fixed(
     keep = [i for i, n in enumerate(res.names) if n not in held]
     est = res.estimate[np.asarray(keep, int)]
     cov = res.covariance[np.ix_(keep, keep)]
-    std = jnp.sqrt(jnp.diag(cov))
+    std, ci95 = _std_and_ci95(est, cov)
     value = dict(zip(res.fixed, np.asarray(res.fixed_values), strict=True))
     value.update(zip(res.names, np.asarray(res.estimate), strict=True))
     names = tuple(res.names[i] for i in keep)
@@ -375,7 +381,7 @@ def held_as_fixed(
         estimate=est,
         covariance=cov,
         std=std,
-        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
+        ci95=ci95,
         chi2_red=jnp.sum(res.standardized**2) / max(dof, 1),
         fixed_values=jnp.asarray([value[n] for n in fixed], est.dtype),
         names=names,
@@ -404,7 +410,7 @@ def make_result(
     fidx = np.flatnonzero(~np.asarray(mask, bool))
     est = estimate_all[idx]
     cov = cov_all[np.ix_(idx, idx)]
-    std = jnp.sqrt(jnp.diag(cov))
+    std, ci95 = _std_and_ci95(est, cov)
     z = residuals / sigma[:, None]
     n = residuals.shape[0]
     dof = 3 * n - len(idx)
@@ -412,7 +418,7 @@ def make_result(
         estimate=est,
         covariance=cov,
         std=std,
-        ci95=jnp.stack([est - Z95 * std, est + Z95 * std], axis=-1),
+        ci95=ci95,
         residuals=residuals,
         standardized=z,
         rms=jnp.sqrt(jnp.mean(residuals**2)),
