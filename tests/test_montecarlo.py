@@ -424,28 +424,61 @@ def test_sequential_chunk_equals_the_vmapped_one(robot, design):
     np.testing.assert_array_equal(np.asarray(a.covered), np.asarray(b.covered))
 
 
+def _shifted(design, dq, rows=None):
+    # The design's angles shifted by a constant (new content to this run; repeated rows
+    # stay repeated), optionally its first `rows` rows only.
+    rows = len(design) if rows is None else rows
+    q = np.rad2deg(np.asarray(design.q[:rows])) + dq
+    return jaxcal.Dataset.from_arrays(q, np.asarray(design.force[:rows]), sigma_mm=0.02)
+
+
 def test_a_study_closed_over_its_design_compiles_once(robot, design):
-    # The example repeats its configurations, so each method's fit is closed over the
-    # design. A second study of equal robot and design content (a notebook cell run
-    # again) reuses the compiled program and gives the same numbers for the same seed;
-    # another design has another key.
+    # The two-step method groups the rows by q2 level on the host, so its fit is closed
+    # over the design. A second study of equal robot and design content (a notebook cell
+    # run again) reuses the compiled program and gives the same numbers for the same
+    # seed; another design has another key.
     from jaxcal.internal import prepare_study
 
-    def shifted(dq):
-        # Shifted by a constant: the rows stay repeated, the content is new to this run.
-        q = np.rad2deg(np.asarray(design.q)) + dq
-        return jaxcal.Dataset.from_arrays(q, np.asarray(design.force), sigma_mm=0.02)
-
-    ds = shifted(0.0123)
-    kw = dict(trials=64, method="linear", noise_std=SIGMA)
+    ds = _shifted(design, 0.0123)
+    kw = dict(trials=64, method="two-step", noise_std=SIGMA)
     a = monte_carlo(robot, ds, seed=1, **kw)
-    b = monte_carlo(robot, shifted(0.0123), seed=2, **kw)
+    b = monte_carlo(robot, _shifted(design, 0.0123), seed=2, **kw)
     c = monte_carlo(robot, ds, seed=1, **kw)
     assert a.compile_seconds > 0.1
     assert b.compile_seconds < 0.05 * a.compile_seconds
     np.testing.assert_array_equal(c.mean, a.mean)
     assert not np.array_equal(b.mean, a.mean)
     keys = [
-        prepare_study(robot, d, "linear", None, None, None)[0].shared for d in (ds, shifted(0.5))
+        prepare_study(robot, d, "two-step", None, None, None)[0].shared
+        for d in (ds, _shifted(design, 0.5))
     ]
     assert keys[0] is not None and keys[1] is not None and keys[0] != keys[1]
+
+
+def test_linear_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
+    robot, design, compiled
+):
+    # The linear method takes the robot and the design's angles as arguments: a study
+    # of another design with as many rows compiles nothing. (37 rows: a size no other
+    # test studies, so the first study's compile is this test's own.) One trial's fit
+    # equals the fit with the design as constants of the program (a direct solve: to
+    # round-off).
+    from jaxcal.internal import prepare_study
+
+    kw = dict(trials=64, method="linear", noise_std=SIGMA)
+    a = monte_carlo(robot, _shifted(design, 0.0321, rows=37), seed=1, **kw)
+    with compiled() as names:
+        b = monte_carlo(robot, _shifted(design, 0.75, rows=37), seed=1, **kw)
+    assert a.compile_seconds > 0.1 and "run" not in names, names
+    assert not np.array_equal(b.mean, a.mean)
+    tf, d0, sigma, _ = prepare_study(
+        robot, _shifted(design, 0.75, rows=37), "linear", None, None, None
+    )
+    assert len(tf.inputs) == 2
+    d = d0 + trial_noise(jax.random.key(3), 0, sigma)
+    f, m = jnp.asarray(tf.force), jnp.asarray(tf.moment)
+    shared = jax.jit(tf.fit)(d, sigma, f, m, *tf.inputs)
+    closed = jax.jit(lambda d, s, f, m: tf.fit(d, s, f, m, *tf.inputs))(d, sigma, f, m)
+    std = np.asarray(shared[1])
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+    np.testing.assert_allclose(np.asarray(shared[0]), np.asarray(closed[0]), rtol=1e-9)

@@ -127,11 +127,12 @@ def trial_fit(
 
     state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
     names = solver.names(state, clean)
-    if method == "nonlinear" and len(configurations(q)[0]) == len(q):
-        # The full model takes the robot and the angles as arguments: every design
-        # with as many distinct rows shares one compiled study. (Repeated rows keep
-        # the fit closed over the design, which solves each distinct unloaded
-        # equilibrium once.)
+    if method == "linear" or (method == "nonlinear" and len(configurations(q)[0]) == len(q)):
+        # The robot and the angles as arguments: every design with as many rows shares
+        # one compiled study (for the full model, as many distinct rows: repeated rows
+        # keep the fit closed over the design, which solves each distinct unloaded
+        # equilibrium once). The two-step method groups the rows by their q2 level on
+        # the host, so its fit stays closed over the design.
         fit = _traced_design(solver, not no_moments)
         inputs, shared = (robot, jnp.asarray(q)), (solver, not no_moments)
     else:
