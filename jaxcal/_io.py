@@ -152,7 +152,7 @@ Q2_LEVEL_TOL_DEG = 0.01
 
 
 def q2_groups(
-    q2: Float[Array, " n"], tol_deg: float = Q2_LEVEL_TOL_DEG
+    q2: Float[Array, " n"] | np.ndarray, tol_deg: float = Q2_LEVEL_TOL_DEG
 ) -> tuple[np.ndarray, np.ndarray]:
     """Distinct q2 levels (rad) of a data set and each row's level index. Sorted
     readings closer than `tol_deg` degrees to the previous one belong to its level,

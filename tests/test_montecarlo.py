@@ -433,48 +433,53 @@ def _shifted(design, dq, rows=None):
 
 
 def test_a_study_closed_over_its_design_compiles_once(robot, design):
-    # The two-step method groups the rows by q2 level on the host, so its fit is closed
-    # over the design. A second study of equal robot and design content (a notebook cell
-    # run again) reuses the compiled program and gives the same numbers for the same
-    # seed; another design has another key.
+    # The full model's fit of a design that repeats its configurations is closed over
+    # the design (it solves each distinct unloaded equilibrium once). A second study of
+    # equal robot and design content (a notebook cell run again) reuses the compiled
+    # program and gives the same numbers for the same seed; another design has another
+    # key. (The first 12 rows: 4 configurations.)
     from jaxcal.internal import prepare_study
 
-    ds = _shifted(design, 0.0123)
-    kw = dict(trials=64, method="two-step", noise_std=SIGMA)
+    free = [n for n in robot.parameter_names if n not in ("k1_urad_per_Nm", "Kc_N_per_m", "s0_m")]
+    ds = _shifted(design, 0.0123, rows=12)
+    kw = dict(trials=16, method="nonlinear", noise_std=SIGMA, free=free)
     a = monte_carlo(robot, ds, seed=1, **kw)
-    b = monte_carlo(robot, _shifted(design, 0.0123), seed=2, **kw)
+    b = monte_carlo(robot, _shifted(design, 0.0123, rows=12), seed=2, **kw)
     c = monte_carlo(robot, ds, seed=1, **kw)
     assert a.compile_seconds > 0.1
     assert b.compile_seconds < 0.05 * a.compile_seconds
     np.testing.assert_array_equal(c.mean, a.mean)
     assert not np.array_equal(b.mean, a.mean)
     keys = [
-        prepare_study(robot, d, "two-step", None, None, None)[0].shared
-        for d in (ds, _shifted(design, 0.5))
+        prepare_study(robot, d, "nonlinear", free, None, None)[0].shared
+        for d in (ds, _shifted(design, 0.5, rows=12))
     ]
     assert keys[0] is not None and keys[1] is not None and keys[0] != keys[1]
 
 
-def test_linear_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
-    robot, design, compiled
+@pytest.mark.parametrize("method", ["linear", "two-step"])
+def test_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
+    robot, design, compiled, method
 ):
-    # The linear method takes the robot and the design's angles as arguments: a study
-    # of another design with as many rows compiles nothing. (37 rows: a size no other
-    # test studies, so the first study's compile is this test's own.) One trial's fit
-    # equals the fit with the design as constants of the program (a direct solve: to
-    # round-off).
+    # The linear and two-step methods take the robot and the design's angles (and the
+    # rows' q2 levels) as arguments: a study of another design with as many rows (and
+    # levels) compiles nothing. (37 rows: a size no other test studies, so the first
+    # study's compile is this test's own.) One trial's fit equals the fit with the
+    # design as constants of the program and the method's own fit of that trial's data
+    # (`fit_linear`, `fit_two_step`: q2 levels found on the host), to round-off (direct
+    # solves).
     from jaxcal.internal import prepare_study
 
-    kw = dict(trials=64, method="linear", noise_std=SIGMA)
+    kw = dict(trials=64, method=method, noise_std=SIGMA)
     a = monte_carlo(robot, _shifted(design, 0.0321, rows=37), seed=1, **kw)
     with compiled() as names:
         b = monte_carlo(robot, _shifted(design, 0.75, rows=37), seed=1, **kw)
     assert a.compile_seconds > 0.1 and "run" not in names, names
     assert not np.array_equal(b.mean, a.mean)
     tf, d0, sigma, _ = prepare_study(
-        robot, _shifted(design, 0.75, rows=37), "linear", None, None, None
+        robot, _shifted(design, 0.75, rows=37), method, None, None, None
     )
-    assert len(tf.inputs) == 2
+    assert len(tf.inputs) == (2 if method == "linear" else 3)
     d = d0 + trial_noise(jax.random.key(3), 0, sigma)
     f, m = jnp.asarray(tf.force), jnp.asarray(tf.moment)
     shared = jax.jit(tf.fit)(d, sigma, f, m, *tf.inputs)
@@ -482,3 +487,8 @@ def test_linear_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
     std = np.asarray(shared[1])
     assert np.all(np.isfinite(std)) and np.all(std > 0)
     np.testing.assert_allclose(np.asarray(shared[0]), np.asarray(closed[0]), rtol=1e-9)
+    ds = _shifted(design, 0.75, rows=37)
+    data = jaxcal.Dataset(ds.q, ds.force, ds.moment, d, sigma)
+    own = (jaxcal.fit_linear if method == "linear" else jaxcal.fit_two_step)(robot, data)
+    np.testing.assert_allclose(np.asarray(shared[0]), np.asarray(own.estimate), rtol=1e-9)
+    np.testing.assert_allclose(std, np.asarray(own.std), rtol=1e-9)

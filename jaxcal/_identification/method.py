@@ -118,6 +118,15 @@ class TwoStepMethod(AbstractMethod):
     def init(self, robot: Robot, design: Dataset) -> TwoStepSystem:
         return two_step_system(robot, design, free=self.free, exact=self.exact)
 
+    def init_with_levels(
+        self, robot: Robot, design: Dataset, level: Int[Array, " n"], n_levels: int
+    ) -> TwoStepSystem:
+        """`init` with the rows' q2 levels given (`level`, each row's index among
+        `n_levels`) instead of found on the host: traceable in the design's angles."""
+        return two_step_system(
+            robot, design, free=self.free, exact=self.exact, levels=(level, n_levels)
+        )
+
     def fit(self, state: TwoStepSystem, deflection: Float[Array, "n 3"]) -> IdentificationResult:
         return solve_two_step(state, deflection)
 

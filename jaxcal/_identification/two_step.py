@@ -72,19 +72,33 @@ class TwoStepSystem(eqx.Module):
     exact: bool = eqx.field(static=True, default=True)
 
 
-def two_step_system(robot: Robot, data: Dataset, *, free=None, exact: bool = True) -> TwoStepSystem:
-    """Host-side set-up of the two-step method: q2 groups, `B_j`, step-1 factorisation
-    and step-2 rows. `free` may hold `k1, k3..k6` fixed (joint 2 and the compensator
-    are what the method is for)."""
+def two_step_system(
+    robot: Robot,
+    data: Dataset,
+    *,
+    free=None,
+    exact: bool = True,
+    levels: tuple[Array, int] | None = None,
+) -> TwoStepSystem:
+    """Set-up of the two-step method: q2 groups, `B_j`, step-1 factorisation and step-2
+    rows. `free` may hold `k1, k3..k6` fixed (joint 2 and the compensator are what the
+    method is for). The q2 groups are found on the host (`q2_groups`) unless `levels`
+    gives them: each row's level index `(n,)` and the number of levels, each level's
+    value then the mean of its rows' q2 (traceable in the angles)."""
     if not robot.has_compensator:
         raise ValueError("the two-step method is for a robot with a compensator; use 'linear'")
     mask = free_mask(robot, free)
     if not all(mask[i] for i in (1, 6, 7)):
         raise ValueError("the two-step method cannot hold k2, Kc or s0 fixed; use 'nonlinear'")
     A = observation_linear(robot, data)
-    q2vals, idx = q2_groups(data.q[:, 1])
-    m = len(q2vals)
-    onehot = jnp.asarray(np.eye(m)[idx], A.dtype)
+    if levels is None:
+        q2vals, idx = q2_groups(data.q[:, 1])
+        m = len(q2vals)
+        onehot = jnp.asarray(np.eye(m)[idx], A.dtype)
+    else:
+        idx, m = levels
+        onehot = jax.nn.one_hot(idx, m, dtype=A.dtype)
+        q2vals = onehot.T @ data.q[:, 1] / jnp.sum(onehot, axis=0)
     B = jnp.concatenate([A[:, :, :1], A[:, :, 1:2] * onehot[:, None, :], A[:, :, 2:]], axis=2)
     s1 = (mask[0],) + (True,) * m + tuple(mask[2:6])
     keep = np.asarray(s1)

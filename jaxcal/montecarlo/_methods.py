@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification.method import AbstractMethod, method_named
-from .._io import Dataset, configurations
+from .._identification.method import AbstractMethod, TwoStepMethod, method_named
+from .._io import Dataset, configurations, q2_groups
 from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
 from .._model.observation import observation_physical
@@ -131,10 +131,17 @@ def trial_fit(
         # The robot and the angles as arguments: every design with as many rows shares
         # one compiled study (for the full model, as many distinct rows: repeated rows
         # keep the fit closed over the design, which solves each distinct unloaded
-        # equilibrium once). The two-step method groups the rows by their q2 level on
-        # the host, so its fit stays closed over the design.
+        # equilibrium once).
         fit = _traced_design(solver, not no_moments)
         inputs, shared = (robot, jnp.asarray(q)), (solver, not no_moments)
+    elif isinstance(solver, TwoStepMethod):
+        # The rows' q2 levels, found here on the host, as an argument too: every design
+        # with as many rows and levels shares one compiled study.
+        levels = q2_groups(q[:, 1])
+        n_levels = len(levels[0])
+        fit = _traced_two_step(solver, not no_moments, n_levels)
+        inputs = (robot, jnp.asarray(q), jnp.asarray(levels[1]))
+        shared = (solver, not no_moments, n_levels)
     else:
         inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
     return TrialFit(
@@ -167,6 +174,19 @@ def _closed_key(solver: AbstractMethod, no_moments: bool, *closed) -> tuple | No
     except TypeError:
         return None
     return key
+
+
+@functools.cache
+def _traced_two_step(solver: TwoStepMethod, moments: bool, n_levels: int) -> Callable:
+    # As `_traced_design`, with the rows' q2 levels an argument.
+
+    def fit(d, sigma, force, moment, robot, q, level):
+        if not moments:
+            moment = np.zeros(d.shape)
+        data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
+        return _from_result(solver.fit(solver.init_with_levels(robot, data, level, n_levels), d))
+
+    return fit
 
 
 @functools.cache
