@@ -189,6 +189,23 @@ class NonlinearMethod(AbstractMethod):
             mask=free_mask(robot, self.free),
         )
 
+    def init_with_configurations(
+        self,
+        robot: Robot,
+        design: Dataset,
+        q_unique: Float[Array, "u 6"],
+        inverse: Int[Array, " n"],
+    ) -> NonlinearState:
+        """`init` with the design's distinct configurations and each row's index into
+        them given instead of found on the host: traceable in the design's angles, and
+        still one unloaded equilibrium per configuration."""
+        state = self.init(robot, design)
+        return eqx.tree_at(
+            lambda s: (s.q_unique, s.inverse),
+            state,
+            (jnp.asarray(q_unique, state.q.dtype), jnp.asarray(inverse)),
+        )
+
     def names(self, state: NonlinearState, deflection: Float[Array, "n 3"]) -> tuple[str, ...]:
         # The free parameters (`make_result`), without tracing the full model's fit
         # (about 2 s of every nonlinear Monte-Carlo study).

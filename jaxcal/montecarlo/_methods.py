@@ -11,16 +11,19 @@ trial.
 from __future__ import annotations
 
 import functools
-import hashlib
 import re
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification.method import AbstractMethod, TwoStepMethod, method_named
+from .._identification.method import (
+    AbstractMethod,
+    NonlinearMethod,
+    TwoStepMethod,
+    method_named,
+)
 from .._io import Dataset, configurations, q2_groups
 from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
@@ -41,13 +44,11 @@ class TrialFit(NamedTuple):
     and `moment`; `unidentifiable()` names the parameters the design cannot determine
     (called only when the noise-free fit fails).
 
-    `inputs`: further traced arguments of `fit` (the robot and the design's angles, for
-    a fit that does not bake them in); `shared`: a hashable key of everything `fit`
-    depends on besides its arguments, so that a later study with an equal key reuses
-    its compiled program: for a fit taking its design as arguments the method alone
-    (other designs of the same size, or another robot of the same structure, share
-    it); for a fit closed over its design the method and the content of the robot and
-    the design; `None` to compile per study."""
+    `inputs`: further traced arguments of `fit` (the robot, the design's angles and
+    their grouping); `shared`: a hashable key of everything `fit` depends on besides
+    its arguments, so that a later study with an equal key reuses its compiled program
+    (the method and its settings: other designs of the same size, or another robot of
+    the same structure, share it); `None` to compile per study."""
 
     names: tuple[str, ...]
     true: np.ndarray
@@ -111,39 +112,30 @@ def trial_fit(
     (the identification names the unidentifiable parameters)."""
     solver = method_named(method, **({} if free is None else {"free": tuple(free)}))
 
-    # A host (numpy) copy of q: under `jit` closed-over jax arrays become tracers, and
-    # the identification groups rows by q2 on the host. Loads may be traced.
+    # A host (numpy) copy of the design: its grouping (distinct configurations, q2
+    # levels) and whether it has moments are found here, on the host.
     q, f, m = (np.asarray(a) for a in (design.q, design.force, design.moment))
-    no_moments = not np.any(m)
-
-    def fit(d, sigma, force, moment):
-        # A design without moments passes its (host) zeros: a traced moment cannot be
-        # seen to be zero, and the model would then carry the moment's generalised
-        # force through every equilibrium (about 3x the cost per trial).
-        if no_moments:
-            moment = m
-        data = Dataset(q, force, moment, None, sigma, design.ids, design.source)  # type: ignore[arg-type]
-        return _from_result(solver.fit(solver.init(robot, data), d))
-
+    moments = bool(np.any(m))
     state = solver.init(robot, Dataset(q, f, m, None, design.sigma))  # type: ignore[arg-type]
     names = solver.names(state, clean)
-    if method == "linear" or (method == "nonlinear" and len(configurations(q)[0]) == len(q)):
-        # The robot and the angles as arguments: every design with as many rows shares
-        # one compiled study (for the full model, as many distinct rows: repeated rows
-        # keep the fit closed over the design, which solves each distinct unloaded
-        # equilibrium once).
-        fit = _traced_design(solver, not no_moments)
-        inputs, shared = (robot, jnp.asarray(q)), (solver, not no_moments)
+    # The robot, the angles and their grouping are arguments of the trial's fit, not
+    # constants of its program: every design of the same size (rows; distinct
+    # configurations for the full model, q2 levels for the two-step method) shares one
+    # compiled study.
+    if isinstance(solver, NonlinearMethod):
+        u, inv = configurations(q)
+        fit = _traced_nonlinear(solver, moments)
+        inputs = (robot, jnp.asarray(q), jnp.asarray(u, q.dtype), jnp.asarray(inv))
+        shared: tuple = (solver, moments)
     elif isinstance(solver, TwoStepMethod):
-        # The rows' q2 levels, found here on the host, as an argument too: every design
-        # with as many rows and levels shares one compiled study.
         levels = q2_groups(q[:, 1])
         n_levels = len(levels[0])
-        fit = _traced_two_step(solver, not no_moments, n_levels)
+        fit = _traced_two_step(solver, moments, n_levels)
         inputs = (robot, jnp.asarray(q), jnp.asarray(levels[1]))
-        shared = (solver, not no_moments, n_levels)
+        shared = (solver, moments, n_levels)
     else:
-        inputs, shared = (), _closed_key(solver, no_moments, robot, q, m)
+        fit = _traced_design(solver, moments)
+        inputs, shared = (robot, jnp.asarray(q)), (solver, moments)
     return TrialFit(
         names,
         true_values(robot, design, names),
@@ -156,26 +148,6 @@ def trial_fit(
     )
 
 
-def _closed_key(solver: AbstractMethod, no_moments: bool, *closed) -> tuple | None:
-    # What a fit closed over its design depends on: the method, and the content of the
-    # robot and the design's angles and moments (structure, static fields included, and
-    # every array's bytes). Equal content finds the compiled study again in a later call
-    # (a notebook re-running a study); `None` (compile per call) if a static field is
-    # not hashable.
-    leaves, treedef = jax.tree.flatten(closed)
-    h = hashlib.sha256()
-    for x in leaves:
-        a = np.asarray(x)
-        h.update(f"{a.shape}{a.dtype}".encode())
-        h.update(np.ascontiguousarray(a).tobytes())
-    key = ("closed", solver, no_moments, treedef, h.hexdigest())
-    try:
-        hash(key)
-    except TypeError:
-        return None
-    return key
-
-
 @functools.cache
 def _traced_two_step(solver: TwoStepMethod, moments: bool, n_levels: int) -> Callable:
     # As `_traced_design`, with the rows' q2 levels an argument.
@@ -185,6 +157,21 @@ def _traced_two_step(solver: TwoStepMethod, moments: bool, n_levels: int) -> Cal
             moment = np.zeros(d.shape)
         data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
         return _from_result(solver.fit(solver.init_with_levels(robot, data, level, n_levels), d))
+
+    return fit
+
+
+@functools.cache
+def _traced_nonlinear(solver: NonlinearMethod, moments: bool) -> Callable:
+    # As `_traced_design`, with the design's distinct configurations and each row's
+    # index into them arguments too (one unloaded equilibrium per configuration).
+
+    def fit(d, sigma, force, moment, robot, q, q_unique, inverse):
+        if not moments:
+            moment = np.zeros(d.shape)
+        data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
+        state = solver.init_with_configurations(robot, data, q_unique, inverse)
+        return _from_result(solver.fit(state, d))
 
     return fit
 

@@ -185,8 +185,8 @@ def prepare_study(robot, design, method, free, clean, noise_std):
     return tf, d0, sigma, method
 
 
-# Compiled chunks by `TrialFit.shared`, the most recently used kept: a program closed
-# over its design holds that design, so they are not kept without bound.
+# Compiled chunks by `TrialFit.shared`, the most recently used kept: one per method,
+# settings and design size, so they are not kept without bound.
 _SHARED: OrderedDict = OrderedDict()
 _SHARED_MAX = 16
 
@@ -244,8 +244,8 @@ def run_study(
     )
     if tf.shared is not None:
         # Kept for later studies with the same fit (`TrialFit.shared`: one program per
-        # design size for a fit taking the design as arguments; per robot and design
-        # for one closed over them); the key holds the argument structure and shapes.
+        # method, settings and design size); the key holds the argument structure and
+        # shapes.
         cache = _SHARED
         ckey = (tf.shared, *ckey, jax.tree.structure(args0), *_shapes(args0))
     t0 = time.perf_counter()
