@@ -499,3 +499,17 @@ def test_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
     own = (jaxcal.fit_linear if method == "linear" else jaxcal.fit_two_step)(robot, data)
     np.testing.assert_allclose(np.asarray(shared[0]), np.asarray(own.estimate), rtol=1e-9)
     np.testing.assert_allclose(std, np.asarray(own.std), rtol=1e-9)
+
+
+def test_noise_and_load_sweeps_compile_once(robot, design):
+    # Every level of a sweep runs the one compiled study (σ and the loads are its
+    # arguments). 29 rows: a size no other test studies, so the first level's compile
+    # is this test's own.
+    ds = _shifted(design, 0.0417, rows=29)
+    noise = jaxcal.noise_sweep(robot, ds, [1e-5, 2e-5, 4e-5], trials=256, method="two-step")
+    loads = jaxcal.load_sweep(robot, ds, [0.5, 2.0], trials=256, method="two-step")
+    assert noise[0].compile_seconds > 0.1
+    later = [r.compile_seconds for r in (*noise[1:], *loads)]
+    assert max(later) < 0.05 * noise[0].compile_seconds, later
+    # The levels are different studies: the estimates' spread grows with σ.
+    assert np.all(noise[2].std > noise[0].std)

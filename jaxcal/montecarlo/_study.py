@@ -210,12 +210,11 @@ def run_study(
     histogram_bins: int | None = None,
     devices: Sequence[Any] | None = None,
     progress: bool = False,
-    cache: dict | None = None,
 ) -> MonteCarloResult:
     """The study itself for a prepared per-trial fit `tf` (see `jaxcal.montecarlo._methods`),
     noise-free deflections `d0` (m) and per-row noise σ (m). Compiled chunks are kept
-    by `tf.shared`; `cache` (a dict) keeps them between calls with the same `tf` (e.g. a
-    sweep over σ) only where `tf.shared` is `None`."""
+    by `tf.shared` (σ, loads and designs of one size are arguments: a sweep compiles
+    once); a `tf` without that key compiles per study."""
     devices = list(jax.devices() if devices is None else devices)
     ndev = len(devices)
     chunk = _DEFAULT_CHUNK.get(method, 1024) if chunk is None else int(chunk)
@@ -223,7 +222,7 @@ def run_study(
         raise ValueError(f"chunk must be positive, got {chunk}")
     chunk = min(chunk, -(-trials // ndev) * ndev)
     chunk = -(-chunk // ndev) * ndev
-    cache = {} if cache is None else cache
+    cache: dict = {}
     p = len(tf.names)
     true = jnp.asarray(tf.true, d0.dtype)
     mesh = Mesh(np.array(devices), ("trials",))

@@ -39,14 +39,13 @@ def noise_sweep(
     prepared = prepare_study(
         robot, design, method, kwargs.pop("free", None), kwargs.pop("clean", None), None
     )
-    cache: dict = {}
     out = []
     for s in noise_levels:
         if not s > 0:
             raise ValueError(f"noise levels must be positive (m), got {s}")
         tf, d0, sigma, method = prepared
         sig = jnp.full_like(sigma, float(s))
-        out.append(run_study(tf, d0, sig, method=method, cache=cache, **kwargs))
+        out.append(run_study(tf, d0, sig, method=method, **kwargs))
     return out
 
 
@@ -67,7 +66,6 @@ def load_sweep(
         raise ValueError("clean deflections cannot be combined with a load sweep")
     check_options(kwargs["trials"], kwargs.get("student_t"), kwargs.get("histogram_bins"))
     tf, _, sigma, method = prepare_study(robot, design, method, free, None, noise_std)
-    cache: dict = {}
     out = []
     for a in scales:
         if not a > 0:
@@ -78,5 +76,5 @@ def load_sweep(
         d0 = model_deflections(robot, scaled)
         assert not isinstance(d0, tuple)
         tfa = tf._replace(force=np.asarray(scaled.force), moment=np.asarray(scaled.moment))
-        out.append(run_study(tfa, d0, sigma, method=method, cache=cache, **kwargs))
+        out.append(run_study(tfa, d0, sigma, method=method, **kwargs))
     return out
