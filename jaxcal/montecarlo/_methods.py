@@ -124,17 +124,17 @@ def trial_fit(
     # compiled study.
     if isinstance(solver, NonlinearMethod):
         u, inv = configurations(q)
-        fit = _traced_nonlinear(solver, moments)
+        fit = _traced(solver, moments)
         inputs = (robot, jnp.asarray(q), jnp.asarray(u, q.dtype), jnp.asarray(inv))
         shared: tuple = (solver, moments)
     elif isinstance(solver, TwoStepMethod):
         levels = q2_groups(q[:, 1])
         n_levels = len(levels[0])
-        fit = _traced_two_step(solver, moments, n_levels)
+        fit = _traced(solver, moments, n_levels)
         inputs = (robot, jnp.asarray(q), jnp.asarray(levels[1]))
         shared = (solver, moments, n_levels)
     else:
-        fit = _traced_design(solver, moments)
+        fit = _traced(solver, moments)
         inputs, shared = (robot, jnp.asarray(q)), (solver, moments)
     return TrialFit(
         names,
@@ -149,42 +149,27 @@ def trial_fit(
 
 
 @functools.cache
-def _traced_two_step(solver: TwoStepMethod, moments: bool, n_levels: int) -> Callable:
-    # As `_traced_design`, with the rows' q2 levels an argument.
+def _traced(solver: AbstractMethod, moments: bool, n_levels: int | None = None) -> Callable:
+    """`fit(d, sigma, force, moment, robot, q, *grouping)`: one trial's `init` and `fit`
+    of `solver` with the design as arguments. `grouping`: for the full model the
+    distinct configurations and each row's index into them, for the two-step method
+    each row's q2 level (among `n_levels`); none for the linear method. One function
+    object per setting, so that jit's cache finds it again."""
 
-    def fit(d, sigma, force, moment, robot, q, level):
-        if not moments:
-            moment = np.zeros(d.shape)
-        data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
-        return _from_result(solver.fit(solver.init_with_levels(robot, data, level, n_levels), d))
-
-    return fit
-
-
-@functools.cache
-def _traced_nonlinear(solver: NonlinearMethod, moments: bool) -> Callable:
-    # As `_traced_design`, with the design's distinct configurations and each row's
-    # index into them arguments too (one unloaded equilibrium per configuration).
-
-    def fit(d, sigma, force, moment, robot, q, q_unique, inverse):
-        if not moments:
-            moment = np.zeros(d.shape)
-        data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
-        state = solver.init_with_configurations(robot, data, q_unique, inverse)
-        return _from_result(solver.fit(state, d))
-
-    return fit
-
-
-@functools.cache
-def _traced_design(solver: AbstractMethod, moments: bool) -> Callable:
-    # One function object per setting, so that jit's cache finds it again.
-
-    def fit(d, sigma, force, moment, robot, q):
+    def fit(d, sigma, force, moment, robot, q, *grouping):
         if not moments:
             # Host zeros: the model then leaves out the moment's generalised force.
             moment = np.zeros(d.shape)
         data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
+        if isinstance(solver, NonlinearMethod):
+            q_unique, inverse = grouping
+            nl = solver.init_with_configurations(robot, data, q_unique, inverse)
+            return _from_result(solver.fit(nl, d))
+        if isinstance(solver, TwoStepMethod):
+            assert n_levels is not None
+            (level,) = grouping
+            ts = solver.init_with_levels(robot, data, level, n_levels)
+            return _from_result(solver.fit(ts, d))
         return _from_result(solver.fit(solver.init(robot, data), d))
 
     return fit
