@@ -357,13 +357,10 @@ def _calibrate(
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
-    if chosen is None and not (want & ~has_prior).any():
-        # Every parameter to fit has a prior, which determines what the data do not: no
-        # start Jacobian to choose among them.
-        fitted = want.copy()
-    elif chosen is None:
-        J = scaled_jacobian(robot, table, data).reshape(-1, len(table))
-        fitted = fitted_parameters(J, want, has_prior, rcond)
+    if chosen is None:
+        # The start Jacobian, only where the pivoting has parameters to choose among.
+        start = lambda: scaled_jacobian(robot, table, data).reshape(-1, len(table))
+        fitted = fitted_parameters(start, want, has_prior, rcond)
     else:
         if np.shape(chosen) != (len(table),):
             raise ValueError(f"fitted must have shape ({len(table)},), got {np.shape(chosen)}")

@@ -5,6 +5,8 @@ less than the noise are left out before the fit rather than inverted."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 __all__ = ["PIVOT_RCOND", "pivoted_subset", "fitted_parameters"]
@@ -51,12 +53,17 @@ def pivoted_subset(
 
 
 def fitted_parameters(
-    J: np.ndarray, want: np.ndarray, has_prior: np.ndarray, rcond: float = PIVOT_RCOND
+    jacobian: Callable[[], np.ndarray],
+    want: np.ndarray,
+    has_prior: np.ndarray,
+    rcond: float = PIVOT_RCOND,
 ) -> np.ndarray:
     """Host-side: `(P,)` bools, the parameters a calibration fits of those it `want`s:
     every one with a prior (the prior determines what the data do not), and of the
-    others those `pivoted_subset` picks from the scaled Jacobian `J` `(m, P)`."""
+    others those `pivoted_subset` picks from the scaled Jacobian `jacobian()` `(m, P)`,
+    computed only where some are left to choose among."""
     fitted = want & has_prior
     pivot = want & ~has_prior
-    fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
+    if pivot.any():
+        fitted[pivot] = pivoted_subset(jacobian()[:, pivot], rcond)
     return fitted
