@@ -21,10 +21,12 @@ import numpy as np
 from .._identification.method import (
     AbstractMethod,
     NonlinearMethod,
+    NonlinearState,
     TwoStepMethod,
     method_named,
 )
-from .._io import Dataset, configurations, q2_groups
+from .._identification.two_step import TwoStepSystem
+from .._io import Dataset
 from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
 from .._model.observation import observation_physical
@@ -121,17 +123,15 @@ def trial_fit(
     # The robot, the angles and their grouping are arguments of the trial's fit, not
     # constants of its program: every design of the same size (rows; distinct
     # configurations for the full model, q2 levels for the two-step method) shares one
-    # compiled study.
-    if isinstance(solver, NonlinearMethod):
-        u, inv = configurations(q)
+    # compiled study. The grouping is the one the method's `init` found above.
+    if isinstance(state, NonlinearState):
         fit = _traced(solver, moments)
-        inputs = (robot, jnp.asarray(q), jnp.asarray(u, q.dtype), jnp.asarray(inv))
+        inputs = (robot, jnp.asarray(q), state.q_unique, state.inverse)
         shared: tuple = (solver, moments)
-    elif isinstance(solver, TwoStepMethod):
-        levels = q2_groups(q[:, 1])
-        n_levels = len(levels[0])
+    elif isinstance(state, TwoStepSystem):
+        n_levels = state.q2.shape[0]
         fit = _traced(solver, moments, n_levels)
-        inputs = (robot, jnp.asarray(q), jnp.asarray(levels[1]))
+        inputs = (robot, jnp.asarray(q), state.group)
         shared = (solver, moments, n_levels)
     else:
         fit = _traced(solver, moments)
