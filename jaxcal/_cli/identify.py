@@ -7,6 +7,11 @@ import sys
 import warnings
 
 from .._identification.identify import METHODS
+from .._identification.parameter_groups import (
+    DEFAULT_GROUPS,
+    DEFLECTION_GROUPS,
+    PARAMETER_GROUPS,
+)
 from .main import (
     add_fix_argument,
     add_overwrite_argument,
@@ -22,7 +27,8 @@ from .main import (
 def register(sub) -> None:
     p = sub.add_parser(
         "identify",
-        help="identify joint compliances and compensator parameters from measured data",
+        help="calibrate a robot from measured data (compliances, compensator; frames and "
+        "DH of a tree robot)",
         description=(
             "Fit the robot's joint compliances k1..k6 (µrad/(N·m)) and compensator "
             "stiffness Kc (N/m) and free length s0 (m) to measured deflections, with "
@@ -36,7 +42,11 @@ def register(sub) -> None:
             "(unless --keep-undetermined), and the measurements that would determine it "
             "are computed and printed (poses in the robot's experiment box, rows, load). "
             "Loads that are zero in every row are an error; rows that "
-            "are exact copies of another row warn (they shrink the standard errors)."
+            "are exact copies of another row warn (they shrink the standard errors). "
+            "A robot given as a kinematic tree is calibrated elasto-geometrically from "
+            "absolute marker positions or deflections: the parameter groups of --params "
+            "(measurement frame, marker offsets, DH errors, joint and lateral compliances, "
+            "masses, spring laws), with optional Gaussian --prior."
         ),
     )
     p.add_argument("data", metavar="DATA.csv", help="measured data (data-format CSV)")
@@ -106,8 +116,10 @@ def register(sub) -> None:
         default=None,
         metavar="GROUPS",
         help="robots given as a kinematic tree (marker positions or deflections): comma-separated "
-        "parameter groups to fit, of frames,joint-offsets,dh,joint-compliance,"
-        "lateral-compliance (default: every group the data determine)",
+        f"parameter groups to fit, of {','.join(PARAMETER_GROUPS)} (default, the full "
+        f"calibration: {','.join(DEFAULT_GROUPS)} for marker positions (origins in place of "
+        f"dh for a URDF robot), {','.join(DEFLECTION_GROUPS)} for deflections; of those, "
+        "each parameter the data determine)",
     )
     add_prior_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

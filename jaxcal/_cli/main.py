@@ -190,11 +190,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxcal",
         description=(
-            "Elastostatic calibration of heavy quasi-serial robots (active parallelogram, "
-            "spring gravity compensator): simulate, identify, design experiments, run "
-            "Monte-Carlo noise studies and find missing model effects. Data files follow "
-            "the CSV format with unit-carrying columns (q1_deg..q6_deg, fx_N.., mx_Nm.., "
-            "dx_mm.., optional sigma_mm, id)."
+            "Elasto-geometric calibration of robots: the built-in FANUC M-900iB/700 "
+            "(active parallelogram, spring gravity compensator) or any robot given as a "
+            "kinematic tree (a robot file of DH rows, or a URDF). Simulate, identify, "
+            "validate on held-out rows, design experiments, run Monte-Carlo noise studies, "
+            "find missing model effects and compensate compliance errors. Data files are "
+            "CSV with unit-carrying columns: q1_deg.. (one per active joint), optional "
+            "loads fx_N.., mx_Nm.., and either deflections dx_mm.. or absolute marker "
+            "positions M_x_mm.. in the measurement system's frame; optional sigma_mm, id."
         ),
         epilog="Run 'jaxcal COMMAND --help' for the options of each command.",
     )

@@ -18,7 +18,7 @@ from .main import (
 def register(sub) -> None:
     p = sub.add_parser(
         "simulate",
-        help="simulate measured deflections for the configurations and loads of a CSV",
+        help="simulate measured deflections (or marker positions) for the rows of a CSV",
         description=(
             "Read the configurations and loads of a data-format CSV (its deflection columns "
             "may be absent and are ignored) and write the same rows with deflections of the "
