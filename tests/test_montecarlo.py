@@ -357,30 +357,6 @@ def test_cli_names_an_unidentifiable_parameter_and_fix_works(robot, design, tmp_
     assert "coverage95" in text and "k2_urad_per_Nm" in text and "k1_urad" not in text
 
 
-def test_shared_nonlinear_fit_equals_the_fit_closed_over_its_design(robot):
-    # A nonlinear study takes the robot and the design's angles as arguments (so that
-    # designs of one size share a compiled program: asserted in
-    # test_design_bound.py's Monte-Carlo test). One trial's fit with them as arguments
-    # equals the same fit with them as constants of the program. The two programs round
-    # differently and Levenberg-Marquardt stops at its tolerance from either side: they
-    # agree to that tolerance, far inside the estimate's standard error.
-    from jaxcal.internal import prepare_study
-
-    free = [n for n in robot.parameter_names if n != "k1_urad_per_Nm"]
-    q = jaxcal.random_designs(robot, 1, 8, seed=4)[0]
-    F = np.asarray(jaxcal.design_loads(robot, jnp.asarray(q)))
-    ds = jaxcal.Dataset.from_arrays(np.rad2deg(q), F, sigma_mm=0.02)
-    tf, d0, sigma, _ = prepare_study(robot, ds, "nonlinear", free, None, None)
-    assert tf.shared is not None and len(tf.inputs) == 4
-    d = d0 + trial_noise(jax.random.key(3), 0, sigma)
-    f, m = jnp.asarray(tf.force), jnp.asarray(tf.moment)
-    shared = jax.jit(tf.fit)(d, sigma, f, m, *tf.inputs)
-    closed = jax.jit(lambda d, s, f, m: tf.fit(d, s, f, m, *tf.inputs))(d, sigma, f, m)
-    est, std = np.asarray(shared[0]), np.asarray(shared[1])
-    assert np.all(np.isfinite(std))
-    assert np.all(np.abs(est - np.asarray(closed[0])) <= 1e-3 * std)
-
-
 def test_sequential_chunk_equals_the_vmapped_one(robot, design):
     # On one CPU device the nonlinear study fits its trials one after another
     # (`lax.map`), elsewhere in a `vmap` (`make_chunk_fn`). Same trials, same fits: the
@@ -453,7 +429,7 @@ def test_designs_that_repeat_configurations_share_a_program(robot, design, compi
     np.testing.assert_array_equal(c.mean, a.mean)
     assert not np.array_equal(b.mean, a.mean)
     tf, d0, sigma, _ = prepare_study(robot, ds, "nonlinear", free, None, None)
-    assert len(tf.inputs) == 4 and tf.inputs[2].shape == (4, 6)
+    assert tf.shared is not None and len(tf.inputs) == 4 and tf.inputs[2].shape == (4, 6)
     d = d0 + trial_noise(jax.random.key(3), 0, sigma)
     f, m = jnp.asarray(tf.force), jnp.asarray(tf.moment)
     est, std = jax.jit(tf.fit)(d, sigma, f, m, *tf.inputs)[:2]
