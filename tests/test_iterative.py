@@ -1,11 +1,12 @@
 """The matrix-free solves of the equilibrium's implicit derivative, against dense
-solves: forward, and transposed by reverse mode."""
+solves: forward, and transposed by reverse mode; where plain iteration diverges, and
+where no solution exists."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcal.internal import implicit_solve, richardson
+from jaxcal.internal import accelerated_solve, implicit_solve
 
 
 def _system(seed: int, n: int = 9, radius: float = 0.3):
@@ -35,8 +36,28 @@ def test_solves_and_transposes_like_a_dense_solve():
     assert "callback" not in text
 
 
-def test_a_map_that_does_not_contract_returns_its_last_iterate():
+def test_a_map_that_does_not_contract_is_solved():
+    # Spectral radius 1.5: the Neumann series diverges, the accelerated iteration (a
+    # Krylov method on an affine map) converges, I − M being non-singular.
     M, b = _system(1, radius=1.5)
-    x = richardson(lambda v: jnp.asarray(M) @ v, jnp.asarray(b), rtol=1e-12, max_steps=8)
+    A = np.eye(len(b)) - M
+    assert min(abs(np.linalg.eigvals(A))) > 0.05
+    x = accelerated_solve(lambda v: jnp.asarray(M) @ v, jnp.asarray(b), rtol=1e-13)
+    np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-9)
+    plain = b.copy()
+    for _ in range(64):
+        plain = b + M @ plain
+    assert not np.allclose(plain, np.linalg.solve(A, b), rtol=1e-3)
+
+
+def test_a_singular_system_returns_its_last_iterate():
+    # I − M singular (M has the eigenvalue 1) and b outside its range: no solution; the
+    # solve stops after max_steps with a finite iterate, which is not one.
+    rng = np.random.default_rng(2)
+    U, _, Vt = np.linalg.svd(rng.normal(size=(9, 9)))
+    A = U @ np.diag([1.0] * 8 + [0.0]) @ Vt  # I − M, of rank 8
+    M, b = np.eye(9) - A, rng.normal(size=9)
+    assert abs(U[:, -1] @ b) > 0.1  # b has a part outside A's range
+    x = accelerated_solve(lambda v: jnp.asarray(M) @ v, jnp.asarray(b), rtol=1e-12, max_steps=8)
     assert bool(jnp.all(jnp.isfinite(x)))
     assert float(jnp.linalg.norm(x - (b + M @ np.asarray(x)))) > 1e-6  # not a solution

@@ -56,10 +56,11 @@ def data(justin):
     return jaxcal.read_markers(DATA, justin)
 
 
-def _soft(robot):
-    """Justin with springs of a plausible size (deflections of several mm)."""
+def _soft(robot, factor: float = 1.0):
+    """Justin with springs of a plausible size (deflections of several mm), or `factor`
+    times as compliant."""
     rev = jnp.asarray(robot.revolute)
-    c = robot.compliance.at[rev].set(jnp.array([8e-6, 3e-6, 3e-6]))
+    c = robot.compliance.at[rev].set(factor * jnp.array([8e-6, 3e-6, 3e-6]))
     return eqx.tree_at(lambda r: r.compliance, robot, c)
 
 
@@ -122,8 +123,18 @@ def test_kinematics_against_independent_dh(justin):
         np.testing.assert_allclose(got, _right_marker_numpy(q), atol=1e-12)
 
 
-def test_equilibrium_is_stationary_and_differentiable(justin, data):
-    robot = _soft(justin)
+@pytest.mark.parametrize(
+    "factor",
+    [
+        1.0,
+        # Series-elastic stiffness (about 200 N·m/rad), deflections of 0.76 rad: at this
+        # pose the plain fixed-point iteration's map has a spectral radius of 1.9 and
+        # diverges, and so would the Neumann series of the derivative's solve.
+        600.0,
+    ],
+)
+def test_equilibrium_is_stationary_and_differentiable(justin, data, factor):
+    robot = _soft(justin, factor)
     q = jnp.asarray(data.q[3])
     # Each check is one jitted program: run op by op, every solve inside would be
     # compiled on its own.
@@ -167,10 +178,15 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data):
     at = jax.jit(marker)
     fd = (at(robot.compliance + h * direction) - at(robot.compliance - h * direction)) / (2 * h)
     np.testing.assert_allclose(tangent, fd, rtol=1e-5, atol=1e-9)
-    np.testing.assert_allclose(rev, tangent, rtol=1e-8, atol=1e-12)
-    # Within the looser solve's accuracy: ρ/(1 − ρ)·JACOBIAN_RTOL of the adjoint's size,
-    # ρ < 0.5.
-    np.testing.assert_allclose(loose, rev, rtol=JACOBIAN_RTOL)
+    # The forward and the transposed solve stop at a residual of `rtol` (relative): their
+    # solutions' error is that times the norm of (I − ∂g/∂φ)⁻¹, about 1 where the map
+    # contracts fast (where they also overshoot it: the last accelerated step lands
+    # far below), a few for the soft robot.
+    close = 1e-8 if factor == 1.0 else 10 * DERIVATIVE_RTOL
+    np.testing.assert_allclose(rev, tangent, rtol=close, atol=1e-12)
+    np.testing.assert_allclose(
+        loose, rev, rtol=JACOBIAN_RTOL if factor == 1.0 else 10 * JACOBIAN_RTOL
+    )
 
 
 def test_jit_vmap_consistency(justin, data):

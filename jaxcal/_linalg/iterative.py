@@ -1,13 +1,15 @@
-"""Matrix-free solves of `(I − M) x = b` for a contraction `M`: Richardson's iteration
-`x ← b + M x`, i.e. the Neumann series of `(I − M)⁻¹`, and the implicit derivative of a
-fixed point built on it.
+"""Matrix-free solves of `(I − M) x = b`: the fixed point of `x ← b + M x` (Richardson's
+iteration, the Neumann series of `(I − M)⁻¹`) with Anderson acceleration, and the
+implicit derivative of a fixed point built on it.
 
 Why: the static equilibrium of a robot is the fixed point `φ = g(φ)` of a map that
-contracts fast (the springs are stiff against the load's own stiffness), and its
+usually contracts fast (the springs are stiff against the load's own stiffness), and its
 derivative solves `(I − ∂g/∂φ) φ̇ = ∂g/∂θ θ̇`. A direct solver first materialises
 `∂g/∂φ`, one Jacobian-vector product per spring deflection (57 for Agile Justin), at
 every pose and every Levenberg–Marquardt step; the same contraction that makes the
 forward iteration converge in a few steps makes this one converge in as many products.
+Where the map does not contract (soft springs), the acceleration still converges for a
+non-singular `I − M`, as the forward solve's does (`anderson.py`).
 
 `implicit_solve` wraps it in `jax.lax.custom_linear_solve`, so forward mode iterates
 Jacobian-vector products and reverse mode vector-Jacobian products (JAX transposes it
@@ -16,9 +18,9 @@ implicit adjoint, it compiles to no host callback (lineax raises from a tangent 
 through one), and programs with a host callback are never written to JAX's persistent
 compilation cache.
 
-A run that does not converge within `max_steps` (a map that does not contract: a
-spring so soft that the robot buckles under its own weight) returns its last iterate.
-The forward iteration has failed first in that case, and its flag marks the point.
+A run that does not converge within `max_steps` (`I − M` singular or nearly: a robot
+that buckles under its own weight) returns its last iterate. The forward iteration has
+failed first in that case, and its flag marks the point.
 
 Where `M` has few columns that matter (a robot with few springs), forming `I − M` on
 them, one product per column, and factoring it costs less than iterating for every
@@ -37,29 +39,35 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .anderson import accelerate, start
 from .dense import lu_factor, lu_solve
 
-__all__ = ["richardson", "implicit_solve", "formed_solve"]
+__all__ = ["accelerated_solve", "implicit_solve", "formed_solve"]
 
 
-def richardson(
+def accelerated_solve(
     apply_m: Callable[[Array], Array], b: Array, *, rtol: float, max_steps: int = 64
 ) -> Array:
-    """`x = (I − M)⁻¹ b` by `x ← b + M x` from `x = b`, until a step changes `x` by at
-    most `rtol ‖b‖` or after `max_steps` steps; `apply_m(v) = M v`."""
-    bound = rtol * jnp.sqrt(jnp.sum(b * b))
+    """`x = (I − M)⁻¹ b` as the fixed point of `x ← b + M x` from `x = b`, with Anderson
+    acceleration (`anderson.py`), until the residual `‖b + M x − x‖` is at most
+    `rtol ‖b‖` or after `max_steps` products; `apply_m(v) = M v`."""
+    shape = b.shape
+    flat_b = b.reshape(-1)
+    bound = rtol * jnp.sqrt(jnp.sum(flat_b * flat_b))
 
     def cond(carry):
-        step, _, change = carry
-        return (step < max_steps) & (change > bound)
+        step, _, _, residual = carry
+        return (step < max_steps) & (residual > bound)
 
     def body(carry):
-        step, x, _ = carry
-        new = b + apply_m(x)
-        return step + 1, new, jnp.sqrt(jnp.sum((new - x) ** 2))
+        step, x, history, _ = carry
+        gx = flat_b + apply_m(x.reshape(shape)).reshape(-1)
+        residual = jnp.sqrt(jnp.sum((gx - x) ** 2))
+        new, history = accelerate(history, x, gx)
+        return step + 1, new, history, residual
 
-    _, x, _ = jax.lax.while_loop(cond, body, (jnp.array(0), b, jnp.asarray(jnp.inf, b.dtype)))
-    return x
+    carry = (jnp.array(0), flat_b, start(flat_b.size, b.dtype), jnp.asarray(jnp.inf, b.dtype))
+    return jax.lax.while_loop(cond, body, carry)[1].reshape(shape)
 
 
 def implicit_solve(
@@ -75,8 +83,10 @@ def implicit_solve(
     return jax.lax.custom_linear_solve(
         lambda v: v - jvp_m(v),
         b,
-        solve=lambda _, rhs: richardson(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
-        transpose_solve=lambda _, rhs: richardson(vjp_m, rhs, rtol=rtol, max_steps=max_steps),
+        solve=lambda _, rhs: accelerated_solve(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
+        transpose_solve=lambda _, rhs: accelerated_solve(
+            vjp_m, rhs, rtol=rtol, max_steps=max_steps
+        ),
     )
 
 

@@ -147,9 +147,9 @@ class JointBacklash(SpringLaw):
     keeps its sign shows it as a constant offset (a joint offset fits it); one whose
     torque reverses across the poses shows the band. It acts through the joint's
     spring: on a joint whose κθ is 0 it does nothing. Its slope `b/w < ½` adds at most
-    half the spring's own share to the fixed-point iteration's contraction factor, so
-    the iteration still contracts while that factor is below 2/3 (0.05–0.08 on Agile
-    Justin). A `JointHardening` on the same joint acts on the whole deflection θ, the
+    half the spring's own share to the equilibrium map's contraction factor (0.05–0.08
+    on Agile Justin; the accelerated iteration also converges past 1). A
+    `JointHardening` on the same joint acts on the whole deflection θ, the
     lost motion included."""
 
     b: Float[Array, ""]

@@ -8,10 +8,11 @@ the masses, the spring laws and the work of an external force. Its stationarity
 condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
 zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
 (`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
-`φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix (the springs are stiff against
-the load's own stiffness, so the iteration contracts fast); derivatives with respect
-to every parameter come from the implicit function theorem, with no host callback in
-the compiled program (so it is cached). Its linear system is solved one of two ways,
+`φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix with Anderson acceleration
+(`_linalg/anderson.py`: stiff springs make the plain iteration contract fast, and the
+acceleration keeps it converging where soft ones would make it diverge); derivatives
+with respect to every parameter come from the implicit function theorem, with no host
+callback in the compiled program (so it is cached). Its linear system is solved one of two ways,
 by the robot's number of springs (`DENSE_SPRINGS`):
 
 - many springs (Agile Justin's 60): by the same contraction (`_linalg/iterative.py`),
@@ -35,6 +36,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from .._linalg.anderson import AndersonAcceleration
 from .._linalg.iterative import formed_solve, implicit_solve
 from .rotations import vee_rotation_derivative
 from .spring_laws import SpringLaw
@@ -125,12 +127,14 @@ class TreeEquilibrium(eqx.Module):
 
 
 #: Relative accuracy of the implicit derivative's solve, by default: the iteration stops
-#: once a step changes the derivative by this fraction of the right-hand side's norm,
-#: which leaves an error of ρ/(1 − ρ) times that (ρ ≈ 0.05–0.08, the contraction on Agile
-#: Justin's poses; more near a compensator), ~1e-7 relative. Each further factor of 10
-#: costs one more product with the equilibrium's Hessian per output, the largest part of
-#: a derivative's cost. `derivative_rtol` sets it per call: a fit's Jacobian needs less
-#: (see `_identification/elastogeometric.py`).
+#: once the residual of `(I − ∂g/∂φ) φ̇ = b` is this fraction of `b`'s norm, which leaves
+#: an error of at most that times the norm of `(I − ∂g/∂φ)⁻¹` (about 1 for the fast
+#: contraction of Agile Justin's poses, ρ ≈ 0.05–0.08, where the last accelerated step
+#: lands far below it; a few for springs soft enough to make the plain iteration
+#: diverge). Each further factor of 10 costs about one more product with the
+#: equilibrium's Hessian per output, the largest part of a derivative's cost.
+#: `derivative_rtol` sets it per call: a fit's Jacobian needs less (see
+#: `_identification/elastogeometric.py`).
 DERIVATIVE_RTOL = 1e-6
 
 #: Robots with at most this many springs take the implicit derivative from the matrix
@@ -221,7 +225,7 @@ def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative
     phi0 = phi0 - _residual(phi0, args)
     sol = optx.fixed_point(
         _step,
-        optx.FixedPointIteration(rtol=tol, atol=tol),
+        AndersonAcceleration(rtol=tol, atol=tol),
         phi0,
         args,
         max_steps=max_steps,

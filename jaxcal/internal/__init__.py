@@ -45,7 +45,10 @@ from .._linalg.covariance import (
     unidentifiable as unidentifiable,
     well_conditioned as well_conditioned,
 )
-from .._linalg.iterative import implicit_solve as implicit_solve, richardson as richardson
+from .._linalg.iterative import (
+    accelerated_solve as accelerated_solve,
+    implicit_solve as implicit_solve,
+)
 from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF
 from .._model.rotations import Ry as Ry
