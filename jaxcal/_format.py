@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["format_table", "jsonable"]
+__all__ = ["format_table", "jsonable", "row_list"]
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
@@ -25,6 +25,14 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> st
     lines = [fmt(cells[0]), "  ".join("-" * w for w in widths)]
     lines += [fmt(r) for r in cells[1:]]
     return "\n".join(lines)
+
+
+def row_list(indices, shown: int = 10) -> str:
+    """0-based row indices as the 1-based row numbers a user reads in the file, the first
+    `shown` of them and how many more: `"3, 4, 9 and 12 more"`."""
+    rows = [int(i) + 1 for i in np.asarray(indices).reshape(-1)]
+    more = f" and {len(rows) - shown} more" if len(rows) > shown else ""
+    return ", ".join(map(str, rows[:shown])) + more
 
 
 def _is_num(v: object) -> bool:

@@ -9,19 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._format import row_list
 from ._io import Q2_LEVEL_TOL_DEG, Dataset, q2_groups
 from ._robot import Robot
 
 __all__ = ["check_loaded", "load_beyond_limit", "duplicate_rows", "merged_q2_levels"]
-
-_SHOWN = 10
-
-
-def _rows(rows) -> str:
-    # 1-based row numbers, the first few of them.
-    rows = [int(r) + 1 for r in rows]
-    more = f" and {len(rows) - _SHOWN} more" if len(rows) > _SHOWN else ""
-    return ", ".join(map(str, rows[:_SHOWN])) + more
 
 
 def check_loaded(data: Dataset) -> None:
@@ -48,7 +40,7 @@ def load_beyond_limit(robot: Robot, data: Dataset) -> str | None:
     if not over.size:
         return None
     return (
-        f"row(s) {_rows(over)}: a load of up to {f.max():.4g} N ({f.max() / limit:.3g}x) is "
+        f"row(s) {row_list(over)}: a load of up to {f.max():.4g} N ({f.max() / limit:.3g}x) is "
         f"beyond the robot file's experiment.max_load_kg ({limit:.4g} N); the model has not "
         "been checked there. Are the loads in N (not kg or kN)?"
     )
@@ -70,7 +62,7 @@ def duplicate_rows(data: Dataset) -> str | None:
     k = int(counts.max())
     return (
         f"{copies.size} of {len(data)} rows are exact copies of an earlier row (angles, loads "
-        f"and deflections; rows {_rows(copies)}): copies are not repeated measurements, and "
+        f"and deflections; rows {row_list(copies)}): copies are not repeated measurements, and "
         f"they make the standard errors up to √{k} = {np.sqrt(k):.3g}x too small. Remove "
         "them unless the instrument really gave identical readings"
     )

@@ -13,6 +13,7 @@ from pathlib import Path
 import equinox as eqx
 import numpy as np
 
+from .._format import row_list
 from .main import (
     check_output_path,
     fix_names,
@@ -279,7 +280,9 @@ def simulate_tree(args: argparse.Namespace) -> int:
     data = read_markers(args.data, robot, require_markers=False)
     y, ok = predicted_markers(robot, data)
     if not ok.all():
-        raise ValueError(f"the equilibrium did not converge at rows {np.flatnonzero(~ok) + 1}")
+        raise ValueError(
+            f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}"
+        )
     if args.noise_mm is not None:
         if args.noise_mm < 0:
             raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._format import row_list
 from .._io import Dataset
 from .._robot import Robot
 from .equilibrium import solve_deflection
@@ -44,13 +45,12 @@ def model_deflections(
         return dp, ok
     bad = np.flatnonzero(~np.asarray(ok))
     if bad.size:
-        rows = ", ".join(str(i + 1) for i in bad[:20])
-        more = f" and {bad.size - 20} more" if bad.size > 20 else ""
         every = (
             " (every row: is the robot file or the load far off?)" if bad.size == len(ok) else ""
         )
         raise DeflectionError(
-            f"static equilibrium did not converge (or is not stable) for row(s) {rows}{more}{every}"
+            "static equilibrium did not converge (or is not stable) for row(s) "
+            f"{row_list(bad, shown=20)}{every}"
         )
     return dp
 

@@ -29,6 +29,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from .._format import row_list
 from .._identification.elastogeometric import fit_markers, observations, poses
 from .._identification.parameter_groups import (
     Parameter,
@@ -197,7 +198,9 @@ def tree_study(
         plan = dataclasses.replace(plan, sigma=np.full(len(plan.q), noise_mm * 1e-3))
     y0, ok = predicted_markers(robot, plan)
     if not ok.all():
-        raise ValueError(f"the equilibrium did not converge at rows {np.flatnonzero(~ok) + 1}")
+        raise ValueError(
+            f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}"
+        )
     groups = default_groups(robot, plan.deflection) if groups is None else groups
     lin = linearised_plan(robot, plan, groups, priors)
     table, cols, scale = lin.table, lin.fitted, lin.scale
