@@ -189,6 +189,24 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data, factor):
     )
 
 
+def test_rows_whose_equilibrium_fails_are_named_in_one_line(justin, tmp_path, capsys):
+    # Springs so soft (about 1 N·m/rad) that the arms fold under their own weight: no
+    # equilibrium near the commanded pose at most rows. The command names the first rows
+    # (1-based, as in the file) and how many more, and stops with exit 2.
+    robot_file = tmp_path / "limp.json"
+    robot_file.write_text(json.dumps(jaxcal.tree_to_dict(_soft(justin, 1e5))))
+    rows = tmp_path / "rows.csv"
+    rows.write_text("\n".join(DATA.read_text().splitlines()[:41]) + "\n")
+    assert main(["simulate", str(rows), "--robot", str(robot_file)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "[" not in err, err
+    found = re.search(r"did not converge at rows ((?:\d+, )*\d+)(?: and (\d+) more)?$", err)
+    assert found, err
+    named = [int(r) for r in found[1].split(", ")]
+    assert len(named) == min(10, len(named) + int(found[2] or 0)) and named == sorted(named)
+    assert 1 <= named[0] and named[-1] <= 40
+
+
 def test_jit_vmap_consistency(justin, data):
     robot = _soft(justin)
     # The 120 rows of `simulated`: one compiled batch program serves both.
