@@ -5,8 +5,9 @@ where no solution exists."""
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
-from jaxcal.internal import accelerated_solve, implicit_solve
+from jaxcal.internal import accelerated_solve, implicit_solve, richardson
 
 
 def _system(seed: int, n: int = 9, radius: float = 0.3):
@@ -16,13 +17,16 @@ def _system(seed: int, n: int = 9, radius: float = 0.3):
     return M, rng.normal(size=n)
 
 
-def test_solves_and_transposes_like_a_dense_solve():
+@pytest.mark.parametrize("accelerated", [False, True])
+def test_solves_and_transposes_like_a_dense_solve(accelerated):
     M, b = _system(0)
     A = np.eye(len(b)) - M
     Mj = jnp.asarray(M)
 
     def solve(v):
-        return implicit_solve(lambda x: Mj @ x, lambda x: Mj.T @ x, v, rtol=1e-14)
+        return implicit_solve(
+            lambda x: Mj @ x, lambda x: Mj.T @ x, v, rtol=1e-14, accelerated=accelerated
+        )
 
     np.testing.assert_allclose(solve(jnp.asarray(b)), np.linalg.solve(A, b), rtol=1e-11)
     # Reverse mode through the solve is the transposed solve; forward mode the solve.
@@ -36,7 +40,14 @@ def test_solves_and_transposes_like_a_dense_solve():
     assert "callback" not in text
 
 
-def test_a_map_that_does_not_contract_is_solved():
+def test_a_map_that_does_not_contract_returns_its_last_iterate():
+    M, b = _system(1, radius=1.5)
+    x = richardson(lambda v: jnp.asarray(M) @ v, jnp.asarray(b), rtol=1e-12, max_steps=8)
+    assert bool(jnp.all(jnp.isfinite(x)))
+    assert float(jnp.linalg.norm(x - (b + M @ np.asarray(x)))) > 1e-6  # not a solution
+
+
+def test_a_map_that_does_not_contract_is_solved_with_acceleration():
     # Spectral radius 1.5: the Neumann series diverges, the accelerated iteration (a
     # Krylov method on an affine map) converges, I − M being non-singular.
     M, b = _system(1, radius=1.5)
@@ -50,7 +61,7 @@ def test_a_map_that_does_not_contract_is_solved():
     assert not np.allclose(plain, np.linalg.solve(A, b), rtol=1e-3)
 
 
-def test_a_singular_system_returns_its_last_iterate():
+def test_a_singular_system_returns_the_accelerated_solves_last_iterate():
     # I − M singular (M has the eigenvalue 1) and b outside its range: no solution; the
     # solve stops after max_steps with a finite iterate, which is not one.
     rng = np.random.default_rng(2)

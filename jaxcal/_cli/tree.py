@@ -13,7 +13,6 @@ from pathlib import Path
 import equinox as eqx
 import numpy as np
 
-from .._format import row_list
 from .main import (
     check_output_path,
     fix_names,
@@ -272,17 +271,14 @@ def _not_determined_line(not_determined: dict, threshold: float, held: bool) -> 
 
 def simulate_tree(args: argparse.Namespace) -> int:
     """`jaxcal simulate` for a tree robot: the model's marker positions at the file's poses."""
-    from .._identification.tree_validation import predicted_markers
+    from .._identification.tree_validation import predicted_markers, require_converged
     from .._markers import read_markers, write_markers
 
     check_output_path(args.output, "-o")
     robot = tree_robot(args)
     data = read_markers(args.data, robot, require_markers=False)
     y, ok = predicted_markers(robot, data)
-    if not ok.all():
-        raise ValueError(
-            f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}"
-        )
+    require_converged(robot, ok)
     if args.noise_mm is not None:
         if args.noise_mm < 0:
             raise ValueError(f"--noise-mm must be non-negative, got {args.noise_mm}")

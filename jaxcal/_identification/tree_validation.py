@@ -10,12 +10,20 @@ import equinox as eqx
 import numpy as np
 
 from .._batching import map_in_chunks, rows_per_call
+from .._format import row_list
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
 from .parameter_groups import PriorSpec, default_groups
 
-__all__ = ["Stage", "split_rows", "validate_tree", "marker_errors", "predicted_markers"]
+__all__ = [
+    "Stage",
+    "split_rows",
+    "validate_tree",
+    "marker_errors",
+    "predicted_markers",
+    "require_converged",
+]
 
 
 _markers_of = eqx.filter_jit(predict_rows)
@@ -32,6 +40,23 @@ def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, n
         x[0].shape[0],
         rows_per_call(),
         *x,
+    )
+
+
+def require_converged(robot: TreeRobot, ok: np.ndarray) -> None:
+    """Raise `ValueError` naming the rows (first few, 1-based) whose equilibrium did not
+    converge (`ok` from `predicted_markers`), and the accelerated solver where the robot
+    does not use it yet."""
+    if np.all(ok):
+        return
+    hint = (
+        "; springs this soft may need the accelerated solver "
+        '("equilibrium_solver": "accelerated" in the robot file)'
+        if robot.equilibrium_solver == "plain"
+        else ""
+    )
+    raise ValueError(
+        f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}{hint}"
     )
 
 

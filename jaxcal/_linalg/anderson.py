@@ -8,11 +8,13 @@ fast (Agile Justin as calibrated: ρ ≈ 0.05–0.08), and plain iteration conve
 ten steps. Springs a few times softer (series-elastic or lightweight arms; the trial
 points of a fit) take ρ past 1: plain iteration then diverges, although the equilibrium
 is stable. Anderson acceleration (type II, memory `m`) steps to the combination of the
-last `m` iterates whose linearised residual is least. It uses only values of `g`, so the
-compiled program stays the size of plain iteration's (a Newton step would put the
-residual's derivative into every program that solves an equilibrium), and on an affine
-map it is a Krylov method: it converges wherever `I − ∂g/∂x` is non-singular (a stable
-equilibrium), not only for a contraction.
+last `m` iterates whose linearised residual is least. It uses only values of `g` (a
+Newton step would put the residual's derivative into every program that solves an
+equilibrium); its bookkeeping still costs about a fifth more compile time than plain
+iteration (Agile Justin's prediction and Jacobian programs), which is why robots opt
+in (`TreeRobot.equilibrium_solver`). On an affine map it is a Krylov method: it
+converges wherever `I − ∂g/∂x` is non-singular (a stable equilibrium), not only for a
+contraction.
 
 The small least-squares problem of each step (`m` unknowns) is solved by the package's
 own Cholesky (`dense.py`: no LAPACK call), with a Tikhonov term relative to its scale;

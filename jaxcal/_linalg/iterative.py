@@ -1,6 +1,6 @@
 """Matrix-free solves of `(I − M) x = b`: the fixed point of `x ← b + M x` (Richardson's
-iteration, the Neumann series of `(I − M)⁻¹`) with Anderson acceleration, and the
-implicit derivative of a fixed point built on it.
+iteration, the Neumann series of `(I − M)⁻¹`), plain or with Anderson acceleration, and
+the implicit derivative of a fixed point built on them.
 
 Why: the static equilibrium of a robot is the fixed point `φ = g(φ)` of a map that
 usually contracts fast (the springs are stiff against the load's own stiffness), and its
@@ -8,8 +8,11 @@ derivative solves `(I − ∂g/∂φ) φ̇ = ∂g/∂θ θ̇`. A direct solver f
 `∂g/∂φ`, one Jacobian-vector product per spring deflection (57 for Agile Justin), at
 every pose and every Levenberg–Marquardt step; the same contraction that makes the
 forward iteration converge in a few steps makes this one converge in as many products.
-Where the map does not contract (soft springs), the acceleration still converges for a
-non-singular `I − M`, as the forward solve's does (`anderson.py`).
+Where the map does not contract (soft springs), `accelerated_solve` (Anderson
+acceleration, `anderson.py`) still converges for a non-singular `I − M`, as the
+accelerated forward solve does; it costs a fifth more compile time than plain
+iteration in every program that differentiates an equilibrium, so it is used for the
+robots that ask for it (`TreeRobot.equilibrium_solver`).
 
 `implicit_solve` wraps it in `jax.lax.custom_linear_solve`, so forward mode iterates
 Jacobian-vector products and reverse mode vector-Jacobian products (JAX transposes it
@@ -18,8 +21,9 @@ implicit adjoint, it compiles to no host callback (lineax raises from a tangent 
 through one), and programs with a host callback are never written to JAX's persistent
 compilation cache.
 
-A run that does not converge within `max_steps` (`I − M` singular or nearly: a robot
-that buckles under its own weight) returns its last iterate. The forward iteration has
+A run that does not converge within `max_steps` (for `richardson` a map that does not
+contract, for `accelerated_solve` an `I − M` that is singular or nearly: a robot that
+buckles under its own weight) returns its last iterate. The forward iteration has
 failed first in that case, and its flag marks the point.
 
 Where `M` has few columns that matter (a robot with few springs), forming `I − M` on
@@ -42,7 +46,28 @@ from jaxtyping import Array
 from .anderson import accelerate, start
 from .dense import lu_factor, lu_solve
 
-__all__ = ["accelerated_solve", "implicit_solve", "formed_solve"]
+__all__ = ["richardson", "accelerated_solve", "implicit_solve", "formed_solve"]
+
+
+def richardson(
+    apply_m: Callable[[Array], Array], b: Array, *, rtol: float, max_steps: int = 64
+) -> Array:
+    """`x = (I − M)⁻¹ b` by `x ← b + M x` from `x = b`, until a step changes `x` by at
+    most `rtol ‖b‖` or after `max_steps` steps; `apply_m(v) = M v`. For a contraction
+    of factor ρ the error left is at most ρ/(1 − ρ) times that."""
+    bound = rtol * jnp.sqrt(jnp.sum(b * b))
+
+    def cond(carry):
+        step, _, change = carry
+        return (step < max_steps) & (change > bound)
+
+    def body(carry):
+        step, x, _ = carry
+        new = b + apply_m(x)
+        return step + 1, new, jnp.sqrt(jnp.sum((new - x) ** 2))
+
+    _, x, _ = jax.lax.while_loop(cond, body, (jnp.array(0), b, jnp.asarray(jnp.inf, b.dtype)))
+    return x
 
 
 def accelerated_solve(
@@ -77,16 +102,17 @@ def implicit_solve(
     *,
     rtol: float,
     max_steps: int = 64,
+    accelerated: bool = False,
 ) -> Array:
     """`(I − M)⁻¹ b`, differentiable and transposable: `jvp_m(v) = M v` and
-    `vjp_m(v) = Mᵀ v` (a fixed point's `∂g/∂φ` and its transpose)."""
+    `vjp_m(v) = Mᵀ v` (a fixed point's `∂g/∂φ` and its transpose); by `richardson`, or
+    with `accelerated` by `accelerated_solve` (for an `M` that does not contract)."""
+    solve = accelerated_solve if accelerated else richardson
     return jax.lax.custom_linear_solve(
         lambda v: v - jvp_m(v),
         b,
-        solve=lambda _, rhs: accelerated_solve(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
-        transpose_solve=lambda _, rhs: accelerated_solve(
-            vjp_m, rhs, rtol=rtol, max_steps=max_steps
-        ),
+        solve=lambda _, rhs: solve(jvp_m, rhs, rtol=rtol, max_steps=max_steps),
+        transpose_solve=lambda _, rhs: solve(vjp_m, rhs, rtol=rtol, max_steps=max_steps),
     )
 
 

@@ -148,7 +148,7 @@ class JointBacklash(SpringLaw):
     torque reverses across the poses shows the band. It acts through the joint's
     spring: on a joint whose κθ is 0 it does nothing. Its slope `b/w < ½` adds at most
     half the spring's own share to the equilibrium map's contraction factor (0.05–0.08
-    on Agile Justin; the accelerated iteration also converges past 1). A
+    on Agile Justin; a robot's accelerated solver also converges past 1). A
     `JointHardening` on the same joint acts on the whole deflection θ, the
     lost motion included."""
 

@@ -49,10 +49,12 @@ from jaxtyping import Array, Float
 
 from .spring_laws import SpringLaw
 
-__all__ = ["TreeRobot", "G", "SPRINGS"]
+__all__ = ["TreeRobot", "G", "SPRINGS", "EQUILIBRIUM_SOLVERS"]
 
 G = 9.80665  # m/s², standard gravity
 SPRINGS = ("theta", "alpha", "beta")  # the robot file's names of an element's springs
+#: How a tree robot's equilibrium is solved (`TreeRobot.equilibrium_solver`).
+EQUILIBRIUM_SOLVERS = ("plain", "accelerated")
 
 
 class TreeRobot(eqx.Module):
@@ -80,7 +82,10 @@ class TreeRobot(eqx.Module):
     whether it has its `(κθ, κα, κβ)` springs), `prismatic` (for each element, whether it
     slides; empty: none does), `geometric_errors` (how a calibration describes the
     joints' geometric errors: `"dh"`, the DH rows' d, a, α, or `"origins"`, the six
-    numbers of each moving element's origin, as a URDF gives them), `mass_element`,
+    numbers of each moving element's origin, as a URDF gives them), `equilibrium_solver`
+    (`"plain"`, the fixed-point iteration, or `"accelerated"`, with Anderson
+    acceleration, for springs soft enough to make the plain one diverge: see
+    `tree_statics.py`), `mass_element`,
     `marker_element`,
     `marker_names`. `laws`: the spring laws acting on joints (each with its own array
     parameters).
@@ -110,6 +115,7 @@ class TreeRobot(eqx.Module):
     lateral_before_joint: bool = eqx.field(static=True, default=False)
     prismatic: tuple[bool, ...] = eqx.field(static=True, default=())
     geometric_errors: str = eqx.field(static=True, default="dh")
+    equilibrium_solver: str = eqx.field(static=True, default="plain")
     name: str = eqx.field(static=True, default="")
     description: str = eqx.field(static=True, default="")
     sources: tuple[str, ...] = eqx.field(static=True, default=())
@@ -135,6 +141,11 @@ class TreeRobot(eqx.Module):
         if len(self.parents) != e or len(self.coupling) != e or len(self.springs) != e:
             raise ValueError(
                 f"parents, coupling and springs must have {e} entries (one per element)"
+            )
+        if self.equilibrium_solver not in EQUILIBRIUM_SOLVERS:
+            raise ValueError(
+                f"equilibrium_solver must be one of {EQUILIBRIUM_SOLVERS}, "
+                f"got {self.equilibrium_solver!r}"
             )
         if self.prismatic and len(self.prismatic) != e:
             raise ValueError(f"prismatic must be empty or have {e} entries (one per element)")

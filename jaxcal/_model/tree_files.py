@@ -13,7 +13,7 @@ import numpy as np
 
 from .._keys import check_keys
 from .spring_laws import spring_law_from_dict, spring_law_to_dict
-from .tree import SPRINGS, G, TreeRobot
+from .tree import EQUILIBRIUM_SOLVERS, SPRINGS, G, TreeRobot
 
 __all__ = ["rpy_from_matrix", "tree_from_dict", "tree_to_dict"]
 
@@ -34,6 +34,7 @@ _KNOWN: dict[str, tuple[str, ...]] = {
         "spring_laws",
         "lateral_springs",
         "geometric_errors",
+        "equilibrium_solver",
         "experiment",
         "calibration",
     ),
@@ -257,6 +258,7 @@ def tree_from_dict(d: dict) -> TreeRobot:
         lateral_before_joint=_lateral(d.get("lateral_springs", "after-joint")),
         prismatic=tuple(sliding) if any(sliding) else (),
         geometric_errors=_geometric(d.get("geometric_errors", "dh")),
+        equilibrium_solver=_solver(d.get("equilibrium_solver", "plain")),
         springs=tuple(springs),
         laws=tuple(
             spring_law_from_dict(x, f"spring_laws[{i}]", jindex) for i, x in enumerate(laws)
@@ -287,6 +289,14 @@ def _limits(j: dict, where: str, prismatic: bool) -> np.ndarray:
 def _geometric(x: Any) -> str:
     if x not in ("dh", "origins"):
         raise ValueError(f"robot file: geometric_errors must be 'dh' or 'origins', got {x!r}")
+    return x
+
+
+def _solver(x: Any) -> str:
+    if x not in EQUILIBRIUM_SOLVERS:
+        raise ValueError(
+            f"robot file: equilibrium_solver must be one of {EQUILIBRIUM_SOLVERS}, got {x!r}"
+        )
     return x
 
 
@@ -396,4 +406,9 @@ def tree_to_dict(robot: TreeRobot) -> dict:
         **({"experiment": _thaw(robot.experiment)} if robot.experiment else {}),
         **({"lateral_springs": "before-joint"} if robot.lateral_before_joint else {}),
         **({"geometric_errors": "origins"} if robot.geometric_errors == "origins" else {}),
+        **(
+            {"equilibrium_solver": robot.equilibrium_solver}
+            if robot.equilibrium_solver != "plain"
+            else {}
+        ),
     }

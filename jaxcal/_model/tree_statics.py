@@ -8,11 +8,15 @@ the masses, the spring laws and the work of an external force. Its stationarity
 condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
 zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
 (`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
-`φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix with Anderson acceleration
-(`_linalg/anderson.py`: stiff springs make the plain iteration contract fast, and the
-acceleration keeps it converging where soft ones would make it diverge); derivatives
-with respect to every parameter come from the implicit function theorem, with no host
-callback in the compiled program (so it is cached). Its linear system is solved one of two ways,
+`φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix (the springs of an arm are stiff
+against the load's own stiffness, so the iteration contracts fast: ρ ≈ 0.05–0.08 on
+Agile Justin's poses). Springs soft enough to take ρ past 1 (series-elastic stiffness,
+a few hundred N·m/rad on an arm of Justin's size) make it diverge although the
+equilibrium is stable: a robot file's `"equilibrium_solver": "accelerated"` then solves
+it, and its derivative, with Anderson acceleration (`_linalg/anderson.py`; a fifth
+more compile time, so not the default). Derivatives with respect to every parameter
+come from the implicit function theorem, with no host callback in the compiled program
+(so it is cached). Its linear system is solved one of two ways,
 by the robot's number of springs (`DENSE_SPRINGS`):
 
 - many springs (Agile Justin's 60): by the same contraction (`_linalg/iterative.py`),
@@ -126,15 +130,15 @@ class TreeEquilibrium(eqx.Module):
     converged: Bool[Array, ""]
 
 
-#: Relative accuracy of the implicit derivative's solve, by default: the iteration stops
-#: once the residual of `(I − ∂g/∂φ) φ̇ = b` is this fraction of `b`'s norm, which leaves
-#: an error of at most that times the norm of `(I − ∂g/∂φ)⁻¹` (about 1 for the fast
-#: contraction of Agile Justin's poses, ρ ≈ 0.05–0.08, where the last accelerated step
-#: lands far below it; a few for springs soft enough to make the plain iteration
-#: diverge). Each further factor of 10 costs about one more product with the
-#: equilibrium's Hessian per output, the largest part of a derivative's cost.
-#: `derivative_rtol` sets it per call: a fit's Jacobian needs less (see
-#: `_identification/elastogeometric.py`).
+#: Relative accuracy of the implicit derivative's solve, by default. The plain iteration
+#: stops once a step changes the derivative by this fraction of the right-hand side's
+#: norm, which leaves an error of ρ/(1 − ρ) times that (ρ ≈ 0.05–0.08, the contraction
+#: on Agile Justin's poses; more near a compensator), ~1e-7 relative; the accelerated
+#: one once the residual is this fraction, an error of at most that times the norm of
+#: `(I − ∂g/∂φ)⁻¹` (a few for springs soft enough to need it). Each further factor of 10
+#: costs one more product with the equilibrium's Hessian per output, the largest part of
+#: a derivative's cost. `derivative_rtol` sets it per call: a fit's Jacobian needs less
+#: (see `_identification/elastogeometric.py`).
 DERIVATIVE_RTOL = 1e-6
 
 #: Robots with at most this many springs take the implicit derivative from the matrix
@@ -215,6 +219,12 @@ def _tolerance(dtype) -> float:
     return 1e-12 if dtype == jnp.float64 else 1e-6
 
 
+def _solver(robot: TreeRobot, tol: float):
+    if robot.equilibrium_solver == "accelerated":
+        return AndersonAcceleration(rtol=tol, atol=tol)
+    return optx.FixedPointIteration(rtol=tol, atol=tol)
+
+
 @eqx.filter_custom_jvp
 def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative_rtol: float):
     args = (robot, q, force, moment, at)
@@ -225,7 +235,7 @@ def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative
     phi0 = phi0 - _residual(phi0, args)
     sol = optx.fixed_point(
         _step,
-        AndersonAcceleration(rtol=tol, atol=tol),
+        _solver(robot, tol),
         phi0,
         args,
         max_steps=max_steps,
@@ -252,7 +262,10 @@ def _fixed_point_jvp(primals, tangents, *, at: int, max_steps: int, derivative_r
     if active.size <= DENSE_SPRINGS:
         return phi, formed_solve(jvp_g, b, active)
     _, vjp = jax.vjp(g, phi)
-    return phi, implicit_solve(jvp_g, lambda v: vjp(v)[0], b, rtol=derivative_rtol)
+    accelerated = robot.equilibrium_solver == "accelerated"
+    return phi, implicit_solve(
+        jvp_g, lambda v: vjp(v)[0], b, rtol=derivative_rtol, accelerated=accelerated
+    )
 
 
 @eqx.filter_jit

@@ -48,6 +48,7 @@ from .._linalg.covariance import (
 from .._linalg.iterative import (
     accelerated_solve as accelerated_solve,
     implicit_solve as implicit_solve,
+    richardson as richardson,
 )
 from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF

@@ -29,7 +29,6 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._format import row_list
 from .._identification.elastogeometric import fit_markers, observations, poses
 from .._identification.parameter_groups import (
     Parameter,
@@ -39,7 +38,7 @@ from .._identification.parameter_groups import (
     prior_stds,
 )
 from .._identification.result import Z95
-from .._identification.tree_validation import predicted_markers
+from .._identification.tree_validation import predicted_markers, require_converged
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._precision import require_float64
@@ -197,10 +196,7 @@ def tree_study(
             raise ValueError(f"noise_mm must be positive, got {noise_mm}")
         plan = dataclasses.replace(plan, sigma=np.full(len(plan.q), noise_mm * 1e-3))
     y0, ok = predicted_markers(robot, plan)
-    if not ok.all():
-        raise ValueError(
-            f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}"
-        )
+    require_converged(robot, ok)
     groups = default_groups(robot, plan.deflection) if groups is None else groups
     lin = linearised_plan(robot, plan, groups, priors)
     table, cols, scale = lin.table, lin.fitted, lin.scale
