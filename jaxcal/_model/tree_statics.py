@@ -10,11 +10,12 @@ zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
 (`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
 `φ = −κ ⊙ ∂V/∂φ` (plus the lost motion) by optimistix (the springs of an arm are stiff
 against the load's own stiffness, so the iteration contracts fast: ρ ≈ 0.05–0.08 on
-Agile Justin's poses). Springs soft enough to take ρ past 1 (series-elastic stiffness,
-a few hundred N·m/rad on an arm of Justin's size) make it diverge although the
-equilibrium is stable: a robot file's `"equilibrium_solver": "accelerated"` then solves
-it, and its derivative, with Anderson acceleration (`_linalg/anderson.py`; a fifth
-more compile time, so not the default). Derivatives with respect to every parameter
+Agile Justin's poses). Springs soft enough to take ρ towards 1 or past it
+(series-elastic stiffness, a few hundred N·m/rad on an arm of Justin's size) make it
+stall in its step budget or diverge although the equilibrium is stable: a robot
+file's `"equilibrium_solver": "accelerated"` then solves it, and its derivative, with
+Anderson acceleration (`_linalg/anderson.py`; a fifth more compile time, so not the
+default). Derivatives with respect to every parameter
 come from the implicit function theorem, with no host callback in the compiled program
 (so it is cached). Its linear system is solved one of two ways,
 by the robot's number of springs (`DENSE_SPRINGS`):
