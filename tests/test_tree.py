@@ -83,6 +83,9 @@ def test_equilibrium_solver_is_a_robot_file_setting(justin):
     assert jaxcal.tree_to_dict(again)["equilibrium_solver"] == "accelerated"
     with pytest.raises(ValueError, match="equilibrium_solver must be one of .* got 'newton'"):
         jaxcal.tree_from_dict({**d, "equilibrium_solver": "newton"})
+    # A URDF's sidecar carries it too.
+    text, sidecar = jaxcal.tree_to_urdf(again)
+    assert jaxcal.load_urdf(text.encode(), sidecar).equilibrium_solver == "accelerated"
 
 
 def _dh(d, theta, a, alpha):
@@ -221,6 +224,12 @@ def test_rows_whose_equilibrium_fails_are_named_in_one_line(justin, tmp_path, ca
     assert len(named) == min(10, len(named) + int(found[2] or 0)) and named == sorted(named)
     assert 1 <= named[0] and named[-1] <= 40
     assert err.endswith('("equilibrium_solver": "accelerated" in the robot file)'), err
+    # A calibration of such a robot says the same in its message.
+    limp = jaxcal.load_tree(robot_file)
+    cal = jaxcal.calibrate_tree(
+        limp, jaxcal.read_markers(DATA, limp).subset(np.arange(6)), ("frames",)
+    )
+    assert not cal.converged and cal.message.endswith("in the robot file)"), cal.message
 
 
 def test_jit_vmap_consistency(justin, data):

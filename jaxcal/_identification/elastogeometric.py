@@ -38,7 +38,7 @@ from .._batching import map_in_chunks, split_map
 from .._exported import exported
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from .._model.tree_statics import DERIVATIVE_RTOL, predict_markers
+from .._model.tree_statics import DERIVATIVE_RTOL, predict_markers, solver_advice
 from .._precision import require_float64
 from .._solution import RESULTS, messages
 from .lsq import LsqFit, nonlinear_fit
@@ -384,6 +384,7 @@ def _calibrate(
     res = np.asarray(fit.residuals)
     err = np.linalg.norm(res, axis=-1)
     converged = bool(fit.result == RESULTS.successful)
+    advice = solver_advice(robot) if fit.result == RESULTS.equilibrium_failed else ""
     return TreeCalibration(
         robot=set_vector(robot, table, jnp.asarray(est)),
         table=table,
@@ -394,7 +395,7 @@ def _calibrate(
         chi2=float(fit.chi2),
         dof=int(res.size + (fitted & has_prior).sum() - fitted.sum()),
         converged=converged,
-        message="" if converged else messages(fit.result)[0],
+        message="" if converged else messages(fit.result)[0] + advice,
         fit=fit,
         seconds=time.perf_counter() - t0,
         prior_std=prior if priors else None,

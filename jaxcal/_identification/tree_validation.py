@@ -13,6 +13,7 @@ from .._batching import map_in_chunks, rows_per_call
 from .._format import row_list
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
+from .._model.tree_statics import solver_advice
 from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
 from .parameter_groups import PriorSpec, default_groups
 
@@ -49,15 +50,8 @@ def require_converged(robot: TreeRobot, ok: np.ndarray) -> None:
     does not use it yet."""
     if np.all(ok):
         return
-    hint = (
-        "; springs this soft may need the accelerated solver "
-        '("equilibrium_solver": "accelerated" in the robot file)'
-        if robot.equilibrium_solver == "plain"
-        else ""
-    )
-    raise ValueError(
-        f"the equilibrium did not converge at rows {row_list(np.flatnonzero(~ok))}{hint}"
-    )
+    rows = row_list(np.flatnonzero(~ok))
+    raise ValueError(f"the equilibrium did not converge at rows {rows}{solver_advice(robot)}")
 
 
 def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:

@@ -63,6 +63,7 @@ __all__ = [
     "tree_equilibrium",
     "tree_deflection",
     "predict_markers",
+    "solver_advice",
 ]
 
 
@@ -214,6 +215,17 @@ def tree_equilibrium(
     change = jnp.max(jnp.abs(_residual(phi, (robot, q, force, moment, at))))
     ok = (change <= tol * (1.0 + jnp.max(jnp.abs(phi)))) & jnp.all(jnp.isfinite(phi))
     return TreeEquilibrium(phi=phi, converged=ok)
+
+
+def solver_advice(robot: TreeRobot) -> str:
+    """What to add to a failed equilibrium's message: the accelerated solver, where
+    `robot` does not use it yet (`""` where it does)."""
+    if robot.equilibrium_solver != "plain":
+        return ""
+    return (
+        "; springs this soft may need the accelerated solver "
+        '("equilibrium_solver": "accelerated" in the robot file)'
+    )
 
 
 def _tolerance(dtype) -> float:

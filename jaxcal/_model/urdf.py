@@ -46,7 +46,7 @@ units in their names):
      "gravity_m_per_s2": [gx, gy, gz], "noise_std_mm": 0.05,
      "spring_laws": [...], "experiment": {...},
      "lateral_springs": "after-joint" | "before-joint",
-     "geometric_errors": "origins" | "dh"}
+     "geometric_errors": "origins" | "dh", "equilibrium_solver": "plain" | "accelerated"}
 
 A joint entry may also give `coupling` (joint name → coefficient) and
 `commanded_coupling`, as in a tree robot file: a coupling that URDF's `<mimic>` of a
@@ -99,6 +99,7 @@ _SIDECAR: dict[str, tuple[str, ...]] = {
         "experiment",
         "lateral_springs",
         "geometric_errors",
+        "equilibrium_solver",
         "calibration",
     ),
     "markers": ("name", "link", "at_m"),
@@ -375,7 +376,7 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
         "spring_laws": side.get("spring_laws", []),
         "geometric_errors": side.get("geometric_errors", "origins"),
     }
-    for key in ("experiment", "lateral_springs", "calibration"):
+    for key in ("experiment", "lateral_springs", "equilibrium_solver", "calibration"):
         if key in side:
             out[key] = side[key]
     return out

@@ -234,6 +234,7 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
         "lateral_springs": "before-joint" if robot.lateral_before_joint else "after-joint",
         "geometric_errors": robot.geometric_errors,
         **({"experiment": d["experiment"]} if "experiment" in d else {}),
+        **({"equilibrium_solver": d["equilibrium_solver"]} if "equilibrium_solver" in d else {}),
     }
     return "\n".join(lines), sidecar
 
