@@ -382,7 +382,6 @@ def _calibrate(
     est = np.asarray(fit.estimate)
     std = np.sqrt(np.clip(np.diag(np.asarray(fit.covariance)), 0.0, None))
     res = np.asarray(fit.residuals)
-    err = np.linalg.norm(res, axis=-1)
     converged = bool(fit.result == RESULTS.successful)
     advice = solver_advice(robot) if fit.result == RESULTS.equilibrium_failed else ""
     return TreeCalibration(
@@ -391,7 +390,7 @@ def _calibrate(
         fitted=fitted,
         estimate=est,
         std=std,
-        rms_mm=float(np.sqrt(np.mean(err**2)) * 1e3),
+        rms_mm=float(np.sqrt(np.mean(np.sum(res**2, axis=-1))) * 1e3),
         chi2=float(fit.chi2),
         dof=int(res.size + (fitted & has_prior).sum() - fitted.sum()),
         converged=converged,
