@@ -462,7 +462,7 @@ def test_studies_of_one_size_share_a_program_and_equal_the_closed_fit(
     tf, d0, sigma, _ = prepare_study(
         robot, _shifted(design, 0.75, rows=37), method, None, None, None
     )
-    assert len(tf.inputs) == (2 if method == "linear" else 3)
+    assert len(tf.inputs) == (2 if method == "linear" else 4)  # + q2 levels and their values
     d = d0 + trial_noise(jax.random.key(3), 0, sigma)
     f, m = jnp.asarray(tf.force), jnp.asarray(tf.moment)
     shared = jax.jit(tf.fit)(d, sigma, f, m, *tf.inputs)

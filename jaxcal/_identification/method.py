@@ -86,6 +86,16 @@ class AbstractMethod(eqx.Module):
         compiled); a method that knows them without tracing says so."""
         return tuple(jax.eval_shape(lambda d: self.fit(state, d), deflection).names)
 
+    def grouping(self, state: Any) -> tuple[Array, ...]:
+        """How `init` grouped the design's rows on the host (arrays), for
+        `init_grouped`; none by default."""
+        return ()
+
+    def init_grouped(self, robot: Robot, design: Dataset, *grouping: Array) -> Any:
+        """`init` with `grouping(state)` given instead of found on the host: traceable in
+        the design's angles, so that designs of one size share a compiled program."""
+        return self.init(robot, design)
+
 
 class LinearMethod(AbstractMethod):
     """Weighted linear least squares on the linear model (eq. 3/5): `k1..k6` with the
@@ -118,13 +128,15 @@ class TwoStepMethod(AbstractMethod):
     def init(self, robot: Robot, design: Dataset) -> TwoStepSystem:
         return two_step_system(robot, design, free=self.free, exact=self.exact)
 
-    def init_with_levels(
-        self, robot: Robot, design: Dataset, level: Int[Array, " n"], n_levels: int
+    def grouping(self, state: TwoStepSystem) -> tuple[Array, ...]:
+        # Each row's q2 level and the levels (their number is the shape's).
+        return state.group, state.q2
+
+    def init_grouped(
+        self, robot: Robot, design: Dataset, level: Int[Array, " n"], q2: Float[Array, " m"]
     ) -> TwoStepSystem:
-        """`init` with the rows' q2 levels given (`level`, each row's index among
-        `n_levels`) instead of found on the host: traceable in the design's angles."""
         return two_step_system(
-            robot, design, free=self.free, exact=self.exact, levels=(level, n_levels)
+            robot, design, free=self.free, exact=self.exact, levels=(level, q2.shape[0])
         )
 
     def fit(self, state: TwoStepSystem, deflection: Float[Array, "n 3"]) -> IdentificationResult:
@@ -189,16 +201,17 @@ class NonlinearMethod(AbstractMethod):
             mask=free_mask(robot, self.free),
         )
 
-    def init_with_configurations(
+    def grouping(self, state: NonlinearState) -> tuple[Array, ...]:
+        # The distinct configurations (one unloaded equilibrium each) and each row's index.
+        return state.q_unique, state.inverse
+
+    def init_grouped(
         self,
         robot: Robot,
         design: Dataset,
         q_unique: Float[Array, "u 6"],
         inverse: Int[Array, " n"],
     ) -> NonlinearState:
-        """`init` with the design's distinct configurations and each row's index into
-        them given instead of found on the host: traceable in the design's angles, and
-        still one unloaded equilibrium per configuration."""
         state = self.init(robot, design)
         return eqx.tree_at(
             lambda s: (s.q_unique, s.inverse),

@@ -18,14 +18,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification.method import (
-    AbstractMethod,
-    NonlinearMethod,
-    NonlinearState,
-    TwoStepMethod,
-    method_named,
-)
-from .._identification.two_step import TwoStepSystem
+from .._identification.method import AbstractMethod, method_named
 from .._io import Dataset
 from .._linalg.covariance import unidentifiable
 from .._model.linear import joint_stiffness
@@ -124,18 +117,9 @@ def trial_fit(
     # constants of its program: every design of the same size (rows; distinct
     # configurations for the full model, q2 levels for the two-step method) shares one
     # compiled study. The grouping is the one the method's `init` found above.
-    if isinstance(state, NonlinearState):
-        fit = _traced(solver, moments)
-        inputs = (robot, jnp.asarray(q), state.q_unique, state.inverse)
-        shared: tuple = (solver, moments)
-    elif isinstance(state, TwoStepSystem):
-        n_levels = state.q2.shape[0]
-        fit = _traced(solver, moments, n_levels)
-        inputs = (robot, jnp.asarray(q), state.group)
-        shared = (solver, moments, n_levels)
-    else:
-        fit = _traced(solver, moments)
-        inputs, shared = (robot, jnp.asarray(q)), (solver, moments)
+    fit = _traced(solver, moments)
+    inputs = (robot, jnp.asarray(q), *solver.grouping(state))
+    shared = (solver, moments)
     return TrialFit(
         names,
         true_values(robot, design, names),
@@ -149,27 +133,17 @@ def trial_fit(
 
 
 @functools.cache
-def _traced(solver: AbstractMethod, moments: bool, n_levels: int | None = None) -> Callable:
-    """`fit(d, sigma, force, moment, robot, q, *grouping)`: one trial's `init` and `fit`
-    of `solver` with the design as arguments. `grouping`: for the full model the
-    distinct configurations and each row's index into them, for the two-step method
-    each row's q2 level (among `n_levels`); none for the linear method. One function
-    object per setting, so that jit's cache finds it again."""
+def _traced(solver: AbstractMethod, moments: bool) -> Callable:
+    """`fit(d, sigma, force, moment, robot, q, *grouping)`: one trial's `init_grouped`
+    and `fit` of `solver` with the design as arguments (`grouping`: the method's
+    `grouping` of its state). One function object per setting, so that jit's cache
+    finds it again."""
 
     def fit(d, sigma, force, moment, robot, q, *grouping):
         if not moments:
             # Host zeros: the model then leaves out the moment's generalised force.
             moment = np.zeros(d.shape)
         data = Dataset(q, force, moment, None, sigma)  # type: ignore[arg-type]
-        if isinstance(solver, NonlinearMethod):
-            q_unique, inverse = grouping
-            nl = solver.init_with_configurations(robot, data, q_unique, inverse)
-            return _from_result(solver.fit(nl, d))
-        if isinstance(solver, TwoStepMethod):
-            assert n_levels is not None
-            (level,) = grouping
-            ts = solver.init_with_levels(robot, data, level, n_levels)
-            return _from_result(solver.fit(ts, d))
-        return _from_result(solver.fit(solver.init(robot, data), d))
+        return _from_result(solver.fit(solver.init_grouped(robot, data, *grouping), d))
 
     return fit
