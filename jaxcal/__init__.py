@@ -48,7 +48,6 @@ from ._identification.method import (
     fit_two_step as fit_two_step,
 )
 from ._identification.methods import (
-    IdentificationResult as IdentificationResult,
     LinearSystem as LinearSystem,
     linear_system as linear_system,
     solve_linear as solve_linear,
@@ -60,6 +59,7 @@ from ._identification.parameter_groups import (
     default_groups as default_groups,
     parameter_table as parameter_table,
 )
+from ._identification.result import IdentificationResult as IdentificationResult
 from ._identification.tree_covariance import saved_covariance as saved_covariance
 from ._identification.tree_validation import (
     Stage as Stage,

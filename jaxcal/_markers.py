@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import TextIO
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
@@ -68,6 +69,20 @@ class MarkerData(eqx.Module):
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
+
+    def observations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Row and marker index of every seen marker (host-side)."""
+        rows, markers = np.nonzero(np.asarray(self.seen))
+        return rows, markers
+
+    def poses(self) -> tuple[Array, Array | None, Array | None]:
+        """Each row's commanded angles and its wrench at the first marker (`None` where
+        the data have none), as arrays with a leading row axis: what a model maps over."""
+        if self.deflection and self.force is None and self.moment is None:
+            raise ValueError("data: deflections without loads (force, moment): nothing deflects")
+        force = None if self.force is None else jnp.asarray(self.force)
+        moment = None if self.moment is None else jnp.asarray(self.moment)
+        return jnp.asarray(self.q), force, moment
 
     def subset(self, rows) -> MarkerData:
         """The rows `rows` (indices or a boolean mask)."""

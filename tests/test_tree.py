@@ -517,7 +517,7 @@ def test_rows_selected_for_a_task_with_priors(justin, data):
     cols = np.array([n in out.names for n in names])
     scale = np.array([p.scale for p in table])[cols]
     Jp = scaled_jacobian(justin, table, pool)[..., cols] / scale  # per SI unit, over σ
-    rows, _ = jaxcal.internal.observations(pool)
+    rows, _ = pool.observations()
     chosen = np.isin(rows, sel.rows)
     Jc = Jp[chosen].reshape(-1, cols.sum())
     springs = np.array([p.group == "joint-compliance" for p in table])[cols]

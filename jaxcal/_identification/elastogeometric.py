@@ -32,7 +32,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
 from .._batching import map_in_chunks, split_map
 from .._exported import exported
@@ -58,8 +57,6 @@ __all__ = [
     "TreeCalibration",
     "calibrate_tree",
     "fit_markers",
-    "observations",
-    "poses",
     "pose_markers",
     "predict_rows",
     "scaled_jacobian",
@@ -88,26 +85,10 @@ JACOBIAN_RTOL = 1e-4
 MAGNITUDE_GROUPS = ("joint-compliance", "lateral-compliance", "masses", "spring-laws")
 
 
-def observations(data: MarkerData) -> tuple[np.ndarray, np.ndarray]:
-    """Row and marker index of every seen marker (host-side)."""
-    rows, markers = np.nonzero(np.asarray(data.seen))
-    return rows, markers
-
-
-def poses(data: MarkerData) -> tuple[Array, Array | None, Array | None]:
-    """Each row's commanded angles and its wrench at the first marker (`None` where the
-    data have none), as arrays with a leading row axis: what `pose_markers` maps over."""
-    if data.deflection and data.force is None and data.moment is None:
-        raise ValueError("data: deflections without loads (force, moment): nothing deflects")
-    force = None if data.force is None else jnp.asarray(data.force)
-    moment = None if data.moment is None else jnp.asarray(data.moment)
-    return jnp.asarray(data.q), force, moment
-
-
 def pose_markers(
     robot: TreeRobot, pose, deflection: bool = False, *, derivative_rtol: float = DERIVATIVE_RTOL
 ):
-    """What a row of `poses(data)` measures: `predict_markers` under the row's load, or
+    """What a row of `data.poses()` measures: `predict_markers` under the row's load, or
     with `deflection` every marker's displacement when the load is applied (loaded minus
     unloaded at the same angles; the deflection data format)."""
     q, force, moment = pose
@@ -127,7 +108,7 @@ def pose_markers(
 
 
 def predict_rows(robot: TreeRobot, x, deflection: bool = False):
-    """`pose_markers` at every row of `poses(data)` (traceable): `(n, k, 3)` and `(n,)`."""
+    """`pose_markers` at every row of `data.poses()` (traceable): `(n, k, 3)` and `(n,)`."""
     return split_map(lambda r, pose: pose_markers(r, pose, deflection), robot, x)
 
 
@@ -152,8 +133,8 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
     `data` (row-major: row, then marker) in the parameters of `table`, each column in
     units of its parameter's typical size (`Parameter.scale`), at `robot`'s values. A
     plan without measurements (`markers=None`) works too."""
-    rows, markers = observations(data)
-    q, force, moment = poses(data)
+    rows, markers = data.observations()
+    q, force, moment = data.poses()
     J = map_in_chunks(
         lambda *pose: _chunk_jacobian(robot, table, pose, data.deflection),
         q.shape[0],
@@ -348,8 +329,8 @@ def _calibrate(
     unknown = [h for h in hold if h not in names]
     if unknown:
         raise ValueError(f"hold: unknown parameter(s) {unknown}")
-    rows, markers = observations(data)
-    x = poses(data)
+    rows, markers = data.observations()
+    x = data.poses()
     q = x[0]
     sigma = jnp.asarray(np.asarray(data.sigma)[rows])
     target = jnp.asarray(np.asarray(data.markers)[rows, markers])

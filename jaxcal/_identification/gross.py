@@ -18,6 +18,8 @@ refit runs the program already compiled for the data's shape.
 from __future__ import annotations
 
 import dataclasses
+import warnings
+from collections.abc import Callable
 from statistics import NormalDist
 
 import jax.numpy as jnp
@@ -26,7 +28,14 @@ import numpy as np
 from .._io import Dataset
 from .result import IdentificationResult
 
-__all__ = ["critical_w", "w_statistics", "exclude_rows", "finalise_excluded", "GROSS_ALPHA"]
+__all__ = [
+    "critical_w",
+    "w_statistics",
+    "exclude_rows",
+    "finalise_excluded",
+    "data_snooping",
+    "GROSS_ALPHA",
+]
 
 #: Probability that a data set without gross errors has a row named as one.
 GROSS_ALPHA = 1e-3
@@ -94,3 +103,42 @@ def finalise_excluded(
         gross_rows=tuple(int(i) for i in rows),
         gross_excluded=True,
     )
+
+
+def data_snooping(
+    res: IdentificationResult,
+    data: Dataset,
+    design: np.ndarray,
+    fit: Callable[[Dataset], IdentificationResult],
+    *,
+    exclude: bool,
+) -> IdentificationResult:
+    """Data snooping of `res`, the fit `fit(data)`: rows named one at a time, each found
+    with the earlier ones excluded and `fit` repeated (a gross error drags the fit, so a
+    single pass would name many innocent rows), until no |w| passes `critical_w`, and
+    each named in a warning. With `exclude=False` the rows are named but the estimates
+    are those of the fit with every row. `design` as in `w_statistics`."""
+    crit = critical_w(3 * len(data))
+    limit = max(1, len(data) // 10)
+    rows: list[int] = []
+    full, cur = res, res
+    while len(rows) < limit:
+        w = w_statistics(cur, design, rows)
+        i = int(np.argmax(w))
+        if not w[i] > crit:
+            break
+        rows.append(i)
+        cur = fit(exclude_rows(data, rows))
+    if not rows:
+        return res
+    cur = finalise_excluded(cur, data, rows)
+    if len(rows) == limit and w_statistics(cur, design, rows).max() > crit:
+        warnings.warn(
+            f"more than {limit} rows look like gross errors; the data set may be wrong as "
+            "a whole (units, frames, sign of the loads)",
+            stacklevel=3,
+        )
+    out = cur if exclude else dataclasses.replace(full, gross_rows=tuple(rows))
+    for line in out.gross_report(data.ids):
+        warnings.warn(line, stacklevel=3)
+    return out

@@ -27,10 +27,11 @@ from .._plausibility import check_loaded, duplicate_rows
 from .._precision import require_float64
 from .._robot import Robot
 from .._solution import messages
-from .gross import critical_w, exclude_rows, finalise_excluded, w_statistics
+from .assembly import held_as_fixed
+from .gross import data_snooping
 from .method import METHODS, fit_jit, method_named
 from .methods import linear_columns
-from .result import THRESHOLD, IdentificationResult, held_as_fixed, resolve_name
+from .result import THRESHOLD, IdentificationResult, resolve_name
 
 __all__ = [
     "identify",
@@ -282,7 +283,7 @@ def identify(
         res = fit(data)
         if screen_gross:
             keep = [i for i, n in enumerate(cols) if n not in fixed]
-            res = _screen_gross(res, data, X[:, keep], fit, exclude=not keep_outliers)
+            res = data_snooping(res, data, X[:, keep], fit, exclude=not keep_outliers)
         return res
 
     structural = [n for n in fixed if n not in user_fixed]
@@ -327,36 +328,6 @@ def _holdable(method: str, names) -> bool:
     # The two-step method estimates k2, Kc and s0 together from the aggregated
     # compliances: it cannot hold any of them.
     return method != "two-step" or not {"k2_urad_per_Nm", "Kc_N_per_m", "s0_m"} & set(names)
-
-
-def _screen_gross(res, data, design, fit, *, exclude: bool):
-    # Rows are found one at a time with the earlier ones excluded (a gross error drags
-    # the fit, so a single pass would name many innocent rows); with `exclude=False`
-    # the rows found are named but the estimates are those of the fit with every row.
-    crit = critical_w(3 * len(data))
-    limit = max(1, len(data) // 10)
-    rows: list[int] = []
-    full, cur = res, res
-    while len(rows) < limit:
-        w = w_statistics(cur, design, rows)
-        i = int(np.argmax(w))
-        if not w[i] > crit:
-            break
-        rows.append(i)
-        cur = fit(exclude_rows(data, rows))
-    if not rows:
-        return res
-    cur = finalise_excluded(cur, data, rows)
-    if len(rows) == limit and w_statistics(cur, design, rows).max() > crit:
-        warnings.warn(
-            f"more than {limit} rows look like gross errors; the data set may be wrong as "
-            "a whole (units, frames, sign of the loads)",
-            stacklevel=3,
-        )
-    out = cur if exclude else dataclasses.replace(full, gross_rows=tuple(rows))
-    for line in out.gross_report(data.ids):
-        warnings.warn(line, stacklevel=3)
-    return out
 
 
 def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:

@@ -32,6 +32,7 @@ from jaxtyping import Array, Float, Int
 
 from .._io import Dataset
 from .._robot import Robot
+from .assembly import free_mask
 from .methods import (
     LinearSystem,
     has_moments,
@@ -40,7 +41,7 @@ from .methods import (
     solve_linear,
     unique_rows,
 )
-from .result import IdentificationResult, free_mask
+from .result import IdentificationResult
 from .two_step import TwoStepSystem, solve_two_step, two_step_system
 
 __all__ = [

@@ -26,19 +26,15 @@ from .._model.observation import observation_linear
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
 from .._solution import RESULTS, result_of
+from .assembly import free_mask, make_result
 from .lsq import LinearFactor, linear_factor, linear_solve_factored, nonlinear_fit
-from .result import IdentificationResult, free_mask, make_result, resolve_name
+from .result import IdentificationResult
 
 __all__ = [
-    "IdentificationResult",
     "linear_system",
     "solve_linear",
     "LinearSystem",
     "full_model_predictor",
-    # re-exported from `_ident_result` for existing importers
-    "free_mask",
-    "make_result",
-    "resolve_name",
 ]
 
 

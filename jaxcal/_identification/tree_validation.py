@@ -14,7 +14,7 @@ from .._format import row_list
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._model.tree_statics import solver_advice
-from .elastogeometric import TreeCalibration, calibrate_tree, observations, poses, predict_rows
+from .elastogeometric import TreeCalibration, calibrate_tree, predict_rows
 from .parameter_groups import PriorSpec, default_groups
 
 __all__ = [
@@ -34,7 +34,7 @@ def predicted_markers(robot: TreeRobot, data: MarkerData) -> tuple[np.ndarray, n
     """`(n, k, 3)` model marker positions (m, measurement frame) at `data`'s poses, under
     their loads if they have any (for deflection data, the markers' displacements under
     the loads), and `(n,)` whether each equilibrium converged."""
-    x = poses(data)
+    x = data.poses()
     # In calls of a fixed size: one program for held-out sets, folds and subsets alike.
     return map_in_chunks(
         lambda *pose: _markers_of(robot, pose, data.deflection),
@@ -57,7 +57,7 @@ def require_converged(robot: TreeRobot, ok: np.ndarray) -> None:
 def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
     """3-D error (m) of every seen marker, measured − model, in `observations` order."""
     y, _ = predicted_markers(robot, data)
-    rows, markers = observations(data)
+    rows, markers = data.observations()
     return np.linalg.norm(np.asarray(data.markers)[rows, markers] - y[rows, markers], axis=-1)
 
 

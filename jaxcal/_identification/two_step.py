@@ -35,8 +35,9 @@ from .._model.observation import observation_linear
 from .._parameters import get_parameters
 from .._robot import URAD, Robot
 from .._solution import RESULTS, result_of
+from .assembly import free_mask, make_result
 from .lsq import LinearFactor, linear_factor, linear_solve_factored
-from .result import IdentificationResult, free_mask, make_result
+from .result import IdentificationResult
 
 __all__ = ["TwoStepSystem", "two_step_system", "solve_two_step", "step2_row"]
 

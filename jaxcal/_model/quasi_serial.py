@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .tree_files import rpy_from_matrix
+from .rotations import rpy_from_matrix
 
 __all__ = ["is_quasi_serial", "tree_dict_from_quasi_serial"]
 

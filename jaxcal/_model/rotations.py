@@ -1,13 +1,17 @@
 """Elementary rotations: about the coordinate axes, and of a rotation vector
 (Rodrigues' formula, exact to second order at zero), shared by the models' kinematics.
-Each handles one angle or vector; batch with `jax.vmap`."""
+Each handles one angle or vector; batch with `jax.vmap`. And, host-side, the roll-pitch-yaw
+angles of a rotation matrix, in which robot files write frames and origins."""
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["Rx", "Ry", "Rz", "skew", "so3_exp", "vee_rotation_derivative"]
+__all__ = ["Rx", "Ry", "Rz", "rpy_from_matrix", "skew", "so3_exp", "vee_rotation_derivative"]
 
 
 def Rx(a: Float[Array, ""]) -> Float[Array, "3 3"]:
@@ -61,3 +65,17 @@ def vee_rotation_derivative(dR: Float[Array, "3 3"], R: Float[Array, "3 3"]) -> 
     # dR·Rᵀ is skew-symmetric; average both halves so round-off does not favour one.
     W = dR @ R.T
     return 0.5 * jnp.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+
+
+def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad) of a rotation matrix, `R = Rz(yaw) Ry(pitch) Rx(roll)`.
+    A matrix printed with rounded entries is first made orthonormal (its nearest rotation
+    by SVD)."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, np.float64)[:3, :3])
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    # atan2, not asin: near pitch ±90° asin loses half the digits.
+    c = math.hypot(R[0, 0], R[1, 0])
+    pitch = math.atan2(-R[2, 0], c)
+    if c < 1e-12:  # gimbal lock: put the whole turn into roll
+        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
+    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])

@@ -1,7 +1,6 @@
 """The robot file of a `TreeRobot` (`"kind": "tree"`): reading it (`tree_from_dict`, every
 problem a `ValueError` naming the key), writing it back (`tree_to_dict`, every digit, so a
-saved calibrated robot predicts what the calibrated model did), and the roll-pitch-yaw
-angles of a rotation matrix that frames and origins are written in."""
+saved calibrated robot predicts what the calibrated model did)."""
 
 from __future__ import annotations
 
@@ -12,10 +11,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._keys import check_keys
+from .rotations import rpy_from_matrix
 from .spring_laws import spring_law_from_dict, spring_law_to_dict
 from .tree import EQUILIBRIUM_SOLVERS, SPRINGS, G, TreeRobot
 
-__all__ = ["rpy_from_matrix", "tree_from_dict", "tree_to_dict"]
+__all__ = ["tree_from_dict", "tree_to_dict"]
+
+#: Where a lateral spring's axes are fixed: the link after the joint (turning with it,
+#: the default) or the link before it.
+LATERAL_SPRINGS = ("after-joint", "before-joint")
 
 _KNOWN: dict[str, tuple[str, ...]] = {
     "": (
@@ -58,20 +62,6 @@ _KNOWN: dict[str, tuple[str, ...]] = {
     "markers": ("name", "element", "at_m"),
     "world": ("xyz_m", "rpy_deg", "matrix"),
 }
-
-
-def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Roll, pitch, yaw (rad) of a rotation matrix, `R = Rz(yaw) Ry(pitch) Rx(roll)`.
-    A matrix printed with rounded entries is first made orthonormal (its nearest rotation
-    by SVD)."""
-    U, _, Vt = np.linalg.svd(np.asarray(R, np.float64)[:3, :3])
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    # atan2, not asin: near pitch ±90° asin loses half the digits.
-    c = math.hypot(R[0, 0], R[1, 0])
-    pitch = math.atan2(-R[2, 0], c)
-    if c < 1e-12:  # gimbal lock: put the whole turn into roll
-        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
-    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
 
 
 def _pose(d: dict, where: str, xyz: str, rpy: str, matrix: str) -> np.ndarray:
@@ -255,10 +245,10 @@ def tree_from_dict(d: dict) -> TreeRobot:
         drive=tuple(drive),
         commanded=tuple(commanded) if any(commanded) else (),
         experiment=_freeze(d.get("experiment", {})),
-        lateral_before_joint=_lateral(d.get("lateral_springs", "after-joint")),
+        lateral_before_joint=_choice(d, "lateral_springs", LATERAL_SPRINGS) == "before-joint",
         prismatic=tuple(sliding) if any(sliding) else (),
-        geometric_errors=_geometric(d.get("geometric_errors", "dh")),
-        equilibrium_solver=_solver(d.get("equilibrium_solver", "plain")),
+        geometric_errors=_choice(d, "geometric_errors", ("dh", "origins")),
+        equilibrium_solver=_choice(d, "equilibrium_solver", EQUILIBRIUM_SOLVERS),
         springs=tuple(springs),
         laws=tuple(
             spring_law_from_dict(x, f"spring_laws[{i}]", jindex) for i, x in enumerate(laws)
@@ -286,26 +276,12 @@ def _limits(j: dict, where: str, prismatic: bool) -> np.ndarray:
     return lim
 
 
-def _geometric(x: Any) -> str:
-    if x not in ("dh", "origins"):
-        raise ValueError(f"robot file: geometric_errors must be 'dh' or 'origins', got {x!r}")
+def _choice(d: dict, key: str, allowed: tuple[str, ...]) -> str:
+    # A setting with named values; absent: the first of them.
+    x = d.get(key, allowed[0])
+    if x not in allowed:
+        raise ValueError(f"robot file: {key} must be one of {allowed}, got {x!r}")
     return x
-
-
-def _solver(x: Any) -> str:
-    if x not in EQUILIBRIUM_SOLVERS:
-        raise ValueError(
-            f"robot file: equilibrium_solver must be one of {EQUILIBRIUM_SOLVERS}, got {x!r}"
-        )
-    return x
-
-
-def _lateral(x: Any) -> bool:
-    if x not in ("after-joint", "before-joint"):
-        raise ValueError(
-            f"robot file: lateral_springs must be 'after-joint' or 'before-joint', got {x!r}"
-        )
-    return x == "before-joint"
 
 
 def _freeze(x: Any) -> Any:

@@ -38,8 +38,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._io import atomic_file
+from .rotations import rpy_from_matrix
 from .tree import TreeRobot
-from .tree_files import rpy_from_matrix, tree_to_dict
+from .tree_files import tree_to_dict
 
 __all__ = ["tree_to_urdf", "save_urdf", "sidecar_path"]
 

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._identification.elastogeometric import observations, scaled_jacobian
+from .._identification.elastogeometric import scaled_jacobian
 from .._identification.parameter_groups import (
     Parameter,
     PriorSpec,
@@ -44,7 +44,7 @@ __all__ = ["LinearisedPlan", "linearised_plan", "row_blocks", "select_tree_rows"
 def row_blocks(J: np.ndarray, data: MarkerData) -> np.ndarray:
     """`(n, 3K, P)`: each row's seen marker coordinates' Jacobian rows, zero for a
     marker not seen (a zero row carries no information)."""
-    rows, markers = observations(data)
+    rows, markers = data.observations()
     n, K = np.asarray(data.seen).shape
     out = np.zeros((n, K, 3, J.shape[-1]))
     out[rows, markers] = J

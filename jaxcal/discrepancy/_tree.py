@@ -44,7 +44,6 @@ import numpy as np
 from .._identification.elastogeometric import (
     TreeCalibration,
     calibrate_tree,
-    observations,
     scaled_jacobian,
 )
 from .._identification.parameter_groups import (
@@ -207,7 +206,7 @@ def _rms_mm(r: np.ndarray, sigma: np.ndarray) -> float:
 def _linearised(cal: TreeCalibration, data: MarkerData):
     """σ-weighted Jacobian `(3m, P)` (columns in typical sizes), residual `(3m,)`, and
     each observation's row and σ, at the calibration's estimate."""
-    rows, markers = observations(data)
+    rows, markers = data.observations()
     sigma = np.asarray(data.sigma, float)[rows]
     y, _ = predicted_markers(cal.robot, data)
     r = (np.asarray(data.markers)[rows, markers] - y[rows, markers]) / sigma[:, None]

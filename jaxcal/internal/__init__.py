@@ -14,10 +14,10 @@ from .._exported import (
     exported as exported,
     set_export_directory as set_export_directory,
 )
+from .._identification.assembly import make_result as make_result
 from .._identification.elastogeometric import (
     JACOBIAN_RTOL as JACOBIAN_RTOL,
     LM_CHI2_TOL as LM_CHI2_TOL,
-    observations as observations,
     scaled_jacobian as scaled_jacobian,
 )
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
@@ -30,7 +30,6 @@ from .._identification.parameter_groups import (
     set_vector as set_vector,
 )
 from .._identification.pivoting import pivoted_subset as pivoted_subset
-from .._identification.result import make_result as make_result
 from .._identification.tree_validation import split_rows as split_rows
 from .._io import (
     OutputError as OutputError,

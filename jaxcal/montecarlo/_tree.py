@@ -29,7 +29,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification.elastogeometric import fit_markers, observations, poses
+from .._identification.elastogeometric import fit_markers
 from .._identification.parameter_groups import (
     Parameter,
     PriorSpec,
@@ -201,7 +201,7 @@ def tree_study(
     lin = linearised_plan(robot, plan, groups, priors)
     table, cols, scale = lin.table, lin.fitted, lin.scale
     truth = np.asarray(get_vector(robot, table))
-    rows, markers = observations(plan)
+    rows, markers = plan.observations()
     d0 = jnp.asarray(y0[rows, markers])
     sigma = jnp.asarray(np.asarray(plan.sigma, float)[rows])
     C, _ = lin.covariance()
@@ -218,7 +218,7 @@ def tree_study(
     else:
         prior = prior_stds(robot, table, priors)
         weight = np.where(np.isfinite(prior), 1.0 / prior, 0.0)  # as `calibrate_tree`
-        inputs = (robot, poses(plan), jnp.asarray(cols, d0.dtype), np.flatnonzero(cols))
+        inputs = (robot, plan.poses(), jnp.asarray(cols, d0.dtype), np.flatnonzero(cols))
         inputs += (rows, markers, jnp.asarray(scale), jnp.asarray(weight))
         tf = TrialFit(
             names,
