@@ -22,10 +22,7 @@ from ._identification.calibration import (
     read_calibration as read_calibration,
     save_robot as save_robot,
 )
-from ._identification.elastogeometric import (
-    TreeCalibration as TreeCalibration,
-    calibrate_tree as calibrate_tree,
-)
+from ._identification.elastogeometric import calibrate_tree as calibrate_tree
 from ._identification.identify import (
     identify as identify,
 )
@@ -61,6 +58,10 @@ from ._identification.parameter_groups import (
 )
 from ._identification.result import IdentificationResult as IdentificationResult
 from ._identification.tree_covariance import saved_covariance as saved_covariance
+from ._identification.tree_result import (
+    GrossError as GrossError,
+    TreeCalibration as TreeCalibration,
+)
 from ._identification.tree_validation import (
     Stage as Stage,
     marker_errors as marker_errors,

@@ -43,8 +43,10 @@ def register(sub) -> None:
             "are computed and printed (poses in the robot's experiment box, rows, load). "
             "Loads that are zero in every row are an error; rows that "
             "are exact copies of another row warn (they shrink the standard errors). "
-            "A robot given as a kinematic tree is calibrated elasto-geometrically from "
-            "absolute marker positions or deflections: the parameter groups of --params "
+            "Gross errors are named one at a time and left out of the estimates (rows; "
+            "for a tree robot, marker observations). A robot given as a kinematic tree "
+            "is calibrated elasto-geometrically from absolute marker positions or "
+            "deflections: the parameter groups of --params "
             "(measurement frame, marker offsets, DH errors, joint and lateral compliances, "
             "masses, spring laws), with optional Gaussian --prior."
         ),
@@ -54,12 +56,14 @@ def register(sub) -> None:
     p.add_argument(
         "--method",
         choices=METHODS,
-        default="nonlinear",
-        help="identification method (default: nonlinear)",
+        default=None,
+        help="identification method (default: nonlinear; tree robots: nonlinear only)",
     )
     add_fix_argument(p, "for a parameter the data cannot identify")
     p.add_argument(
-        "--robust", action="store_true", help="Huber loss (down-weights outliers; nonlinear only)"
+        "--robust",
+        action="store_true",
+        help="Huber loss (down-weights outliers; nonlinear only; not for tree robots)",
     )
     p.add_argument(
         "--outlier-threshold",
@@ -71,8 +75,8 @@ def register(sub) -> None:
     p.add_argument(
         "--keep-outliers",
         action="store_true",
-        help="keep rows named as gross errors in the fit (by default they are excluded; "
-        "either way they are named)",
+        help="keep rows (tree robots: marker observations) named as gross errors in the fit "
+        "(by default they are excluded; either way they are named)",
     )
     p.add_argument(
         "--save-robot",
@@ -143,7 +147,17 @@ def run(args: argparse.Namespace) -> int:
     if is_tree_file(args.robot):
         from .tree import identify_tree
 
+        if args.method not in (None, "nonlinear"):
+            raise ValueError(
+                f"--method {args.method}: tree robots are calibrated by the nonlinear fit only"
+            )
+        if args.robust:
+            raise ValueError(
+                "--robust: for robots in the deflection form; a tree robot's gross errors "
+                "are named and left out of the fit without it (--keep-outliers keeps them)"
+            )
         return identify_tree(args)
+    args.method = args.method or "nonlinear"
     if args.prior:
         raise ValueError(
             "--prior: priors are for robots given as a kinematic tree; "

@@ -103,7 +103,12 @@ def identify_tree(args: argparse.Namespace) -> int:
         threshold=args.max_relative_std,
         hold_undetermined=args.hold_undetermined,
         priors=priors,
+        screen_gross=True,
+        keep_outliers=args.keep_outliers,
     )
+    for line in cal.gross_report(data):
+        print(f"jaxcal identify: warning: {line}", file=sys.stderr)
+    gross = cal.gross_list(data)
     prior_std = cal.prior_std if cal.prior_std is not None else np.full(len(cal.table), np.inf)
     params = []
     for p, f, v, s, ps in zip(cal.table, cal.fitted, cal.estimate, cal.std, prior_std, strict=True):
@@ -149,6 +154,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             "held": list(cal.held),
             "not_determined": list(cal.not_determined),
             "priors": priors,
+            "gross_errors": gross,
             "covariance": covariance_block(cal.table, cal.fitted, np.asarray(cal.fit.covariance)),
         }
         try:
@@ -176,6 +182,7 @@ def identify_tree(args: argparse.Namespace) -> int:
         "threshold": cal.threshold,
         "priors": priors,
         "not_determined": not_determined,
+        "gross_errors": gross,
         "saved_robot": saved,
     }
     if advice is not None:
@@ -196,7 +203,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             print("\n".join(advice.lines()))
         print(
             f"RMS 3-D {'deflection' if data.deflection else 'marker'} error {cal.rms_mm:.3f} mm "
-            f"over {len(data)} rows; "
+            f"over {len(data)} rows{_excluded(cal)}; "
             f"chi2 {cal.chi2:.6g} on {cal.dof} degrees of freedom"
         )
         if saved and urdf_out:
@@ -217,6 +224,11 @@ def identify_tree(args: argparse.Namespace) -> int:
         print(f"jaxcal identify: error: {cal.message}", file=sys.stderr)
         return 1
     return 0
+
+
+def _excluded(cal) -> str:
+    n = len(cal.excluded)
+    return f" ({n} marker observation{'s' * (n > 1)} excluded as gross errors)" if n else ""
 
 
 _HEAD = ["parameter", "group", "estimate", "std", "95% low", "95% high", "unit"]

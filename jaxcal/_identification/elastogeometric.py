@@ -26,7 +26,6 @@ choices.
 from __future__ import annotations
 
 import time
-from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -40,6 +39,7 @@ from .._model.tree import TreeRobot
 from .._model.tree_statics import DERIVATIVE_RTOL, predict_markers, solver_advice
 from .._precision import require_float64
 from .._solution import RESULTS, messages
+from .gross import INFLATE, snoop_markers
 from .lsq import LsqFit, nonlinear_fit
 from .parameter_groups import (
     Parameter,
@@ -51,7 +51,8 @@ from .parameter_groups import (
     set_vector,
 )
 from .pivoting import PIVOT_RCOND, fitted_parameters
-from .result import THRESHOLD, Z95, relative_std, upper_bound95
+from .result import THRESHOLD, relative_std
+from .tree_result import TreeCalibration
 
 __all__ = [
     "TreeCalibration",
@@ -147,63 +148,6 @@ def scaled_jacobian(robot: TreeRobot, table: tuple[Parameter, ...], data: Marker
     return J * scale / np.asarray(data.sigma)[rows][:, None, None]
 
 
-class TreeCalibration(NamedTuple):
-    """An elasto-geometric calibration.
-
-    - `robot`: the calibrated robot (fitted parameters set, held ones as given).
-    - `table`: the parameters considered; `fitted`: which the data determined and were
-      fitted (`held`: the names of the others).
-    - `estimate`, `std`: `(P,)` SI values and standard deviations (0 where held).
-    - `rms_mm`: RMS 3-D marker error on the data, mm; `chi2`, `dof`.
-    - `fit`: the raw `LsqFit`; `seconds`: wall time.
-    - `not_determined`: fitted magnitudes (`MAGNITUDE_GROUPS`) whose relative std
-      exceeds `threshold`, or that were held for it (`hold_undetermined`);
-      `free_values`: their estimate and std in the fit that had them free (SI).
-    - `prior_std`: `(P,)` the Gaussian priors' std (SI, centred on the robot file's
-      values), `inf` where a parameter has none; `None`: no priors. With priors,
-      `estimate` and `std` are the posterior ones and `chi2`, `dof` count the priors'
-      terms.
-    """
-
-    robot: TreeRobot
-    table: tuple[Parameter, ...]
-    fitted: np.ndarray
-    estimate: np.ndarray
-    std: np.ndarray
-    rms_mm: float
-    chi2: float
-    dof: int
-    converged: bool
-    message: str
-    fit: LsqFit
-    seconds: float
-    not_determined: tuple[str, ...] = ()
-    free_values: tuple[tuple[float, float], ...] = ()
-    threshold: float = THRESHOLD
-    prior_std: np.ndarray | None = None
-
-    @property
-    def held(self) -> tuple[str, ...]:
-        return tuple(p.name for p, f in zip(self.table, self.fitted, strict=True) if not f)
-
-    def interval95(self, name: str) -> tuple[float, float] | None:
-        """The two-sided 95 % interval of a fitted parameter in its printed unit, or
-        `None` for one held or not determined by these data."""
-        i = [p.name for p in self.table].index(name)
-        if not self.fitted[i] or name in self.not_determined:
-            return None
-        p, v, s = self.table[i], self.estimate[i], self.std[i]
-        return float((v - Z95 * s) * p.factor), float((v + Z95 * s) * p.factor)
-
-    def bound95(self, name: str) -> float | None:
-        """One-sided 95 % upper bound (printed unit) of a parameter not determined by
-        these data, from the fit that had it free; `None` where the data give none
-        (the bound would not be positive)."""
-        p = self.table[[q.name for q in self.table].index(name)]
-        b = upper_bound95(*self.free_values[self.not_determined.index(name)])
-        return None if b is None else b * p.factor
-
-
 def _undetermined(table, fitted, est, std, threshold) -> list[int]:
     rel = relative_std(est, std)
     return [
@@ -276,6 +220,8 @@ def calibrate_tree(
     hold_undetermined: bool = False,
     priors: dict[str, PriorSpec] | None = None,
     fitted: np.ndarray | None = None,
+    screen_gross: bool = False,
+    keep_outliers: bool = False,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
@@ -290,13 +236,28 @@ def calibrate_tree(
     with a prior is fitted (unless held) whether or not the data determine it.
     `fitted` `(P,)`, where already known for these poses (repeated fits of one plan,
     `linearised_plan(...).fitted`): the parameters to fit, without the start Jacobian
-    that chooses them (`hold` and `fit_groups` still apply). Never raises on a failed
-    fit: see `converged` and `message`.
+    that chooses them (`hold` and `fit_groups` still apply). `screen_gross`: name the
+    marker observations that are gross errors (`tree_gross.py`, one at a time) and
+    exclude them from the fit, unless `keep_outliers`. Never raises on a failed fit:
+    see `converged` and `message`.
     """
     require_float64("calibration", robot.compliance, np.asarray(data.q))
     if not threshold > 0:
         raise ValueError(f"threshold must be positive, got {threshold}")
-    cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors, fitted)
+
+    def fit(start, hold, chosen=None, excluded=()):
+        args = (groups, fit_groups, hold, max_steps, rcond, priors, chosen, excluded)
+        return _calibrate(start, data, *args)
+
+    cal = fit(robot, hold, fitted)
+    if screen_gross and cal.converged:
+        # From the robot's values, as the first fit: Levenberg–Marquardt started at the
+        # estimate, or at its linearised update, takes more steps in the near-redundant
+        # directions (Agile Justin's 300 training rows: 30 and 27 steps against 16).
+        jac = lambda c: scaled_jacobian(c.robot, c.table, data)
+        refit = lambda excluded: fit(robot, hold, cal.fitted, excluded)
+        cal = snoop_markers(cal, data, jacobian=jac, refit=refit, exclude=not keep_outliers)
+    excluded = cal.excluded
     flagged: dict[str, tuple[float, float]] = {}
     while True:
         over = _undetermined(cal.table, cal.fitted, cal.estimate, cal.std, threshold)
@@ -305,9 +266,8 @@ def calibrate_tree(
         if not over or not hold_undetermined:
             break
         hold = (*hold, *(cal.table[i].name for i in over))
-        seconds = cal.seconds
-        cal = _calibrate(robot, data, groups, fit_groups, hold, max_steps, rcond, priors)
-        cal = cal._replace(seconds=cal.seconds + seconds)
+        again = fit(robot, hold, None, excluded)
+        cal = again._replace(seconds=again.seconds + cal.seconds, gross=cal.gross)
     names = tuple(p.name for p in cal.table if p.name in flagged)
     return cal._replace(
         not_determined=names,
@@ -317,7 +277,7 @@ def calibrate_tree(
 
 
 def _calibrate(
-    robot, data, groups, fit_groups, hold, max_steps, rcond, priors, chosen=None
+    robot, data, groups, fit_groups, hold, max_steps, rcond, priors, chosen=None, excluded=()
 ) -> TreeCalibration:
     if data.markers is None:
         raise ValueError("data: no marker measurements to calibrate on")
@@ -332,7 +292,8 @@ def _calibrate(
     rows, markers = data.observations()
     x = data.poses()
     q = x[0]
-    sigma = jnp.asarray(np.asarray(data.sigma)[rows])
+    sigma = np.asarray(data.sigma)[rows].copy()
+    sigma[list(excluded)] *= INFLATE  # out of the fit, in the same program
     target = jnp.asarray(np.asarray(data.markers)[rows, markers])
     scale = jnp.asarray([p.scale for p in table])
     want = np.array([p.group in fit_groups and p.name not in hold for p in table])
@@ -355,14 +316,14 @@ def _calibrate(
         rows,
         markers,
         target,
-        sigma,
+        jnp.asarray(sigma),
         scale,
         jnp.asarray(np.where(has_prior, 1.0 / prior, 0.0), q.dtype),
         max_steps,
     )
     est = np.asarray(fit.estimate)
     std = np.sqrt(np.clip(np.diag(np.asarray(fit.covariance)), 0.0, None))
-    res = np.asarray(fit.residuals)
+    res = np.delete(np.asarray(fit.residuals), list(excluded), axis=0)
     converged = bool(fit.result == RESULTS.successful)
     advice = solver_advice(robot) if fit.result == RESULTS.equilibrium_failed else ""
     return TreeCalibration(
@@ -379,4 +340,5 @@ def _calibrate(
         fit=fit,
         seconds=time.perf_counter() - t0,
         prior_std=prior if priors else None,
+        excluded=tuple(excluded),
     )

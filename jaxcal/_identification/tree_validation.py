@@ -14,8 +14,9 @@ from .._format import row_list
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._model.tree_statics import solver_advice
-from .elastogeometric import TreeCalibration, calibrate_tree, predict_rows
+from .elastogeometric import calibrate_tree, predict_rows
 from .parameter_groups import PriorSpec, default_groups
+from .tree_result import TreeCalibration
 
 __all__ = [
     "Stage",

@@ -20,7 +20,7 @@ from jaxtyping import Array, Float
 
 from .._batching import map_in_chunks, rows_per_call
 from .._identification.calibration import Calibration
-from .._identification.elastogeometric import TreeCalibration
+from .._identification.tree_result import TreeCalibration
 from .._io import F_COLS, M_COLS, Q_COLS, Dataset, atomic_file, input_cells, read_dataset
 from .._markers import MarkerData, joint_units, marker_columns, read_markers
 from .._model.tree import TreeRobot

@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._identification.elastogeometric import TreeCalibration, scaled_jacobian
+from .._identification.elastogeometric import scaled_jacobian
+from .._identification.tree_result import TreeCalibration
 from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
 from .._markers import MarkerData, random_plan

@@ -20,7 +20,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._identification.elastogeometric import TreeCalibration, scaled_jacobian
+from .._identification.elastogeometric import scaled_jacobian
+from .._identification.tree_result import TreeCalibration
 from .._markers import MarkerData, random_plan
 from ._t_optimal import greedy_t_rows, lack_of_fit
 

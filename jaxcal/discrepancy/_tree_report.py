@@ -8,8 +8,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._identification.elastogeometric import TreeCalibration
 from .._identification.result import Z95
+from .._identification.tree_result import TreeCalibration
 from ._report import DECISIVE_BIC
 
 __all__ = ["TreeCandidate", "TreeEffect", "TreeDiscovery"]
