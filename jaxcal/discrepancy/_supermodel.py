@@ -194,68 +194,69 @@ class SuperModel:
         the `SLOTS` parameters at indices `trial.sel`), `trial.mask` marking which move.
 
         Returns `(p, residual (n, 3) m, chi2, Jw (3n, nn+SLOTS), solved, valid, steps)`;
-        `Jw` is the σ-weighted model Jacobian w.r.t. *all* of u (masked or not) at the
-        result."""
+        `Jw` is the σ-weighted model Jacobian w.r.t. *all* of u at the result."""
         robot, design, scale = model
         p0, sel, mask, target, sigma = trial
         nn = self.n_nominal
         sc = jnp.concatenate([scale[:nn], scale[sel]])
 
-        def embed(u, m):
-            d = m * sc * u
+        def embed(u):
+            d = sc * u
             return p0.at[:nn].add(d[:nn]).at[sel].add(d[nn:])
 
-        def weighted(u, m):
-            dp, ok = self._predict(robot, design, embed(u, m))
+        def weighted(u):
+            dp, ok = self._predict(robot, design, embed(u))
             return ((target - dp) / sigma[:, None]).reshape(-1), ok
 
-        def r_and_jac(u, m):
-            # Forward mode, one JVP per fitted parameter (≤ 11): the Jacobian is
-            # materialised once per LM step, so LM's linearisation is a plain matrix
-            # product (transposing through the equilibrium's inner solves is not needed).
-            f = lambda v: weighted(v, m)
+        def r_and_jac(u):
+            # Forward mode, one JVP per parameter (≤ 11): the Jacobian is materialised
+            # once per LM step, so LM's linearisation is a plain matrix product
+            # (transposing through the equilibrium's inner solves is not needed).
             r, J, ok = jax.vmap(
-                lambda e: jax.jvp(f, (u,), (e,), has_aux=True), out_axes=(None, 1, None)
+                lambda e: jax.jvp(weighted, (u,), (e,), has_aux=True), out_axes=(None, 1, None)
             )(jnp.eye(u.shape[0], dtype=u.dtype))
             return r, jnp.where(jnp.isfinite(J), J, 0.0), ok
 
+        # LM moves what `mask` marks (nothing when only evaluating); each evaluation is
+        # the model and its Jacobian in all of u, and the solver's final state holds the
+        # one at the result: one copy of the model in the program (a second took half
+        # its compile time).
+        moving = mask * jnp.asarray(fit, mask.dtype)
+
+        def evaluate(u):
+            r, J, ok = r_and_jac(u * mask)
+            return r, (r, J, ok.astype(u.dtype))
+
         @jax.custom_jvp
         def residual(u):
-            return weighted(u, mask)[0]
+            return evaluate(u)
 
         @residual.defjvp
         def _residual_jvp(primals, tangents):
             (u,), (t,) = primals, tangents
-            r, J, _ = r_and_jac(u, mask)
-            return r, J @ t
+            out = evaluate(u)
+            zeros = jax.tree_util.tree_map(jnp.zeros_like, out[1])
+            return out, ((out[1][1] * moving) @ t, zeros)
 
         u0 = jnp.zeros(nn + SLOTS, p0.dtype)
-
-        def run_fit(_):
-            sol = optx.least_squares(
-                lambda u, _: residual(u),
-                levenberg_marquardt(RTOL, ATOL),
-                u0,
-                max_steps=max_steps,
-                throw=False,
-                options={"jac": "fwd"},
-            )
-            ok = sol.result == optx.RESULTS.successful
-            return sol.value, ok, jnp.asarray(sol.stats["num_steps"], jnp.int32)
-
-        def no_fit(_):
-            return u0, jnp.array(True), jnp.array(0, dtype=jnp.int32)
-
-        # `fit` is one scalar for the whole batch (not vmapped), so this stays a real
-        # branch: evaluations (predictions, Jacobians for screening) share the compile.
-        u, solved, steps = jax.lax.cond(fit, run_fit, no_fit, None)
-        # One evaluation at the result: the model's flags do not depend on the mask.
-        r, Jw, ok = r_and_jac(u, jnp.ones_like(mask))
+        sol = optx.least_squares(
+            lambda u, _: residual(u),
+            levenberg_marquardt(RTOL, ATOL),
+            u0,
+            has_aux=True,
+            max_steps=max_steps,
+            throw=False,
+            options={"jac": "fwd"},
+        )
+        u = sol.value * mask
+        r, Jw, ok = sol.state.aux
+        solved = (sol.result == optx.RESULTS.successful) | jnp.invert(fit)
+        steps = jnp.where(fit, jnp.asarray(sol.stats["num_steps"], jnp.int32), 0)
         # J is of the residual (target − model)/σ; the model's is its negative.
         Jw = -Jw / sc[None, :]
         res = r.reshape(-1, 3) * sigma[:, None]
-        valid = jnp.all(ok) & jnp.all(jnp.isfinite(r))
-        return embed(u, mask), res, jnp.sum(r**2), Jw, solved, valid, steps
+        valid = jnp.all(ok > 0.5) & jnp.all(jnp.isfinite(r))
+        return embed(u), res, jnp.sum(r**2), Jw, solved, valid, steps
 
     def _batched(self, model: _Model, trials: _Trial, fit, max_steps):
         # On a CPU a call holds one member and `batch_map` runs it untransformed (one
