@@ -60,6 +60,10 @@ class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
     less than `sqrt(chi2_tol)` standard deviations along the step). A model with many
     weakly determined parameters otherwise spends half its steps there (a tree robot's
     full calibration: χ² equal to 1e-7 relative after 25 of 51 steps).
+
+    The option `"evaluate_only"` (a traced bool) stops it after its first step, which
+    evaluates the residual at the start: one compiled program then fits or only
+    evaluates, the evaluation in its final state (`aux`).
     """
 
     chi2_tol: float
@@ -85,7 +89,8 @@ class StallingLevenbergMarquardt(optx.LevenbergMarquardt):
         step = state.y_eval - y  # y is one array here (the scaled free parameters)
         tiny = self.norm(step) < self.atol + self.rtol * self.norm(y)
         stalled = (state.num_steps_since_acceptance > 0) & tiny & jnp.invert(state.first_step)
-        return done | stalled, result
+        evaluated = options.get("evaluate_only", False) & jnp.invert(state.first_step)
+        return done | stalled | evaluated, result
 
 
 def levenberg_marquardt(

@@ -217,11 +217,10 @@ class SuperModel:
             )(jnp.eye(u.shape[0], dtype=u.dtype))
             return r, jnp.where(jnp.isfinite(J), J, 0.0), ok
 
-        # LM moves what `mask` marks (nothing when only evaluating); each evaluation is
-        # the model and its Jacobian in all of u, and the solver's final state holds the
-        # one at the result: one copy of the model in the program (a second took half
-        # its compile time).
-        moving = mask * jnp.asarray(fit, mask.dtype)
+        # LM moves what `mask` marks (or stops after evaluating at the start); each
+        # evaluation is the model and its Jacobian in all of u, and the solver's final
+        # state holds the one at the result: one copy of the model in the program (a
+        # second took half its compile time).
 
         def evaluate(u):
             r, J, ok = r_and_jac(u * mask)
@@ -236,7 +235,7 @@ class SuperModel:
             (u,), (t,) = primals, tangents
             out = evaluate(u)
             zeros = jax.tree_util.tree_map(jnp.zeros_like, out[1])
-            return out, ((out[1][1] * moving) @ t, zeros)
+            return out, ((out[1][1] * mask) @ t, zeros)
 
         u0 = jnp.zeros(nn + SLOTS, p0.dtype)
         sol = optx.least_squares(
@@ -246,7 +245,7 @@ class SuperModel:
             has_aux=True,
             max_steps=max_steps,
             throw=False,
-            options={"jac": "fwd"},
+            options={"jac": "fwd", "evaluate_only": jnp.invert(fit)},
         )
         u = sol.value * mask
         r, Jw, ok = sol.state.aux
