@@ -237,7 +237,7 @@ def calibrate_tree(
     `fitted` `(P,)`, where already known for these poses (repeated fits of one plan,
     `linearised_plan(...).fitted`): the parameters to fit, without the start Jacobian
     that chooses them (`hold` and `fit_groups` still apply). `screen_gross`: name the
-    marker observations that are gross errors (`tree_gross.py`, one at a time) and
+    marker observations that are gross errors (`gross.py`, one at a time) and
     exclude them from the fit, unless `keep_outliers`. Never raises on a failed fit:
     see `converged` and `message`.
     """

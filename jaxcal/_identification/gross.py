@@ -68,15 +68,21 @@ def critical_w(n_observations: int, alpha: float = GROSS_ALPHA) -> float:
     return NormalDist().inv_cdf(1.0 - alpha / (2.0 * max(n_observations, 1)))
 
 
+def _scaled_svd(X: np.ndarray):
+    # The SVD `U, s, Vt` of `X` with its columns scaled by `1/d` to unit norm, its
+    # numerically null directions dropped (no matrix is inverted), and `d`.
+    X = np.asarray(X, float)
+    d = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
+    U, s, Vt = np.linalg.svd(X / d, full_matrices=False)
+    on = s > 1e-10 * s[0]
+    return U[:, on], s[on], Vt[on], d
+
+
 def leverages(X: np.ndarray) -> np.ndarray:
     """The diagonal of the hat matrix of the weighted design `X` `(rows, p)`: each row's
     leverage, the share of its own residual that the fit absorbs. Columns are normalised
     first and numerically null directions dropped (no matrix is inverted)."""
-    X = np.asarray(X, float)
-    X = X / np.maximum(np.linalg.norm(X, axis=0), 1e-300)
-    U, s, _ = np.linalg.svd(X, full_matrices=False)
-    U = U[:, s > 1e-10 * s[0]]
-    return np.sum(U**2, axis=1)
+    return np.sum(_scaled_svd(X)[0] ** 2, axis=1)
 
 
 def w_statistics(
@@ -206,11 +212,7 @@ def _without(design: _Design, z: np.ndarray, excluded: list[int]):
     m, _, F = X.shape
     keep = np.ones(m, bool)
     keep[excluded] = False
-    A = np.concatenate([X[keep].reshape(-1, F), P])
-    d = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
-    U, s, Vt = np.linalg.svd(A / d, full_matrices=False)
-    on = s > 1e-10 * s[0]
-    U, s, Vt = U[:, on], s[on], Vt[on]
+    U, s, Vt, d = _scaled_svd(np.concatenate([X[keep].reshape(-1, F), P]))
     h = np.zeros((m, 3))
     h[keep] = np.sum(U[: 3 * int(keep.sum())] ** 2, axis=1).reshape(-1, 3)
     # At the optimum the gradient over all rows is zero, so the kept rows' gradient is
