@@ -6,8 +6,12 @@ With `--hold-study`, the full calibration of each split twice: the springs the
 training rows do not determine one by one (relative std above 10 %) left fitted, then
 held at the robot file's values (`hold_undetermined=True`); held-out error of both.
 
+With `--worst N`, where the held-out maximum comes from: each split's N largest
+held-out marker errors beside the same marker's residual in the full calibration on
+all rows (the error that observation leaves when the model is fitted to it too).
+
 Run: `python benchmarks/bench_justin.py [--seeds 0 1 2] [--no-validate] [--no-identify]
-[--hold-study]`.
+[--hold-study] [--worst N]`.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import time
 from pathlib import Path
 
 import jax
+import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
@@ -94,13 +99,42 @@ def hold_study(seeds: list[int]) -> None:
             )
 
 
+def worst_study(seeds: list[int], n: int) -> None:
+    robot = jaxcal.load_tree("dlr_agile_justin")
+    data = jaxcal.read_markers(DATA, robot)
+    names = robot.marker_names
+    rows, markers = data.observations()
+    full = jaxcal.marker_errors(jaxcal.calibrate_tree(robot, data).robot, data) * 1e3
+    fitted = dict(
+        zip(zip(rows.tolist(), markers.tolist(), strict=True), full.tolist(), strict=True)
+    )
+    print(
+        f"all {len(data)} rows calibrated: residual mean {full.mean():.2f}, max {full.max():.2f} mm"
+    )
+    for seed in seeds:
+        train, test = split_rows(len(data), 200, seed)
+        cal = jaxcal.calibrate_tree(robot, data.subset(train))
+        part = data.subset(test)
+        e = jaxcal.marker_errors(cal.robot, part) * 1e3
+        r, m = part.observations()
+        worst = ", ".join(
+            f"row {data.ids[test[r[i]]]} {names[m[i]]} {e[i]:.2f} (fitted "
+            f"{fitted[(int(test[r[i]]), int(m[i]))]:.2f})"
+            for i in np.argsort(-e)[:n]
+        )
+        print(f"seed {seed}: held-out mean {e.mean():.2f}, max {e.max():.2f} mm; {worst}")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2])
     ap.add_argument("--no-validate", action="store_true")
     ap.add_argument("--no-identify", action="store_true")
     ap.add_argument("--hold-study", action="store_true")
+    ap.add_argument("--worst", type=int, default=0, metavar="N")
     a = ap.parse_args()
+    if a.worst:
+        worst_study(a.seeds, a.worst)
     if a.hold_study:
         hold_study(a.seeds)
     if not a.no_identify:

@@ -62,7 +62,16 @@ from ..design._criteria import criteria_from_observation as criteria_from_observ
 from ..design._observation import screw_jacobian as screw_jacobian
 from ..design._problem import problem_criteria as problem_criteria
 from ..design._reference import pool_values as pool_values
-from ..design._select import pool_bound as pool_bound, swap_values as swap_values
+from ..design._select import (
+    pool_bound as pool_bound,
+    subset_values as subset_values,
+    swap_values as swap_values,
+)
+from ..design._select_tree import (
+    linearised_plan as linearised_plan,
+    row_blocks as row_blocks,
+    task_weight as task_weight,
+)
 from ..discrepancy._batch_fit import BatchFit as BatchFit
 from ..discrepancy._heldout import (
     LEVERAGE_MAX as LEVERAGE_MAX,
