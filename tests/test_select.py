@@ -51,6 +51,39 @@ def test_exchange_finds_the_best_subset_and_the_bound_is_below_it(criterion):
 
 
 @pytest.mark.parametrize("criterion", ["det", "trace", "task"])
+def test_the_bound_with_a_prior_is_below_every_subset_and_exact_for_the_whole_pool(criterion):
+    # With a prior's information P0 on every subset, the relaxation's certificate:
+    # below the best k-subset (exhaustive), lower still where rows may repeat; with
+    # k = n the only weights are the whole pool's, whose value it must then reach to
+    # the certificate's stopping gap (1e-3 relative, absolute for det's logarithm).
+    rng = np.random.default_rng(11)
+    n, r, p, k = 12, 3, 6, 4  # fewer rows than parameters: only the prior makes M whole
+    obs = rng.normal(size=(n, r, p)) * np.array([1.0, 30.0, 0.05, 3.0, 0.3, 10.0])
+    sigma = rng.uniform(0.5, 2.0, n)
+    prior = rng.uniform(0.2, 3.0, p) * np.array([1.0, 900.0, 0.0025, 9.0, 0.09, 100.0])
+    G = rng.normal(size=(p, p))
+    W = G @ G.T if criterion == "task" else None
+
+    def value(rows):
+        A = obs[list(rows)] / sigma[list(rows), None, None]
+        M = np.diag(prior) + np.einsum("nrp,nrq->pq", A, A)
+        if criterion == "det":
+            return -np.linalg.slogdet(M)[1]
+        return float(np.trace(np.linalg.solve(M, np.eye(p) if W is None else W)))
+
+    best = min(value(s) for s in itertools.combinations(range(n), k))
+    args = dict(criterion=criterion, weight=W, prior=prior)
+    once = pool_bound(obs, sigma, k, **args)
+    again = pool_bound(obs, sigma, k, distinct=False, **args)
+    assert again <= once + 1e-12 * abs(once) and once <= best
+    sel = select_rows(obs, sigma, k, **args)
+    assert once <= sel.value
+    whole = value(range(n))
+    tol = 1e-3 * (1.0 if criterion == "det" else abs(whole))
+    assert whole - tol <= pool_bound(obs, sigma, n, **args) <= whole + 1e-9 * abs(whole)
+
+
+@pytest.mark.parametrize("criterion", ["det", "trace", "task"])
 def test_swap_values_match_each_swapped_subsets_criterion(criterion):
     # Every (chosen, pool) swap from the current inverse alone, against the criterion of
     # the swapped subset computed afresh; a row that alone sees a parameter cannot be

@@ -555,8 +555,11 @@ def test_rows_selected_for_a_task_with_priors(justin, data):
         justin, pool, 20, criterion="task", groups=groups, priors=priors, task=task
     )
     sel = out.selection
-    assert sel.full_rank and len(sel.rows) == 20 and np.isnan(out.efficiency)
+    assert sel.full_rank and len(sel.rows) == 20
     assert sel.value < np.median(out.random)
+    # The pool's bound, the priors' information included, is below every subset.
+    assert out.bound <= min(sel.value, np.min(out.random)) and 0 < out.efficiency <= 1
+    assert out.efficiency == pytest.approx(out.bound / sel.value)
     # C = (Σ_chosen JᵀJ/σ² + diag(1/std²))⁻¹ and trace(C W), W = mean JᵀJ over the task's
     # seen markers, in SI units, from the Jacobians alone.
     table = jaxcal.parameter_table(justin, groups)
@@ -607,7 +610,11 @@ def test_cli_evaluates_chosen_rows_as_their_selection_predicted(data, tmp_path, 
     assert main([*args, "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["task_rms_mm"] == pytest.approx(1e3 * np.sqrt(out.selection.value), rel=1e-8)
-    assert d["rows"] == 20 and d["priors"] == priors and d["bound"] is None
+    assert d["rows"] == 20 and d["priors"] == priors
+    # Its bound: plans of 20 rows among its poses and the drawn ones, under the priors.
+    assert 0 < d["bound"] <= d["trace"] and d["efficiency"] == pytest.approx(
+        d["bound"] / d["trace"]
+    )
     assert main(args) == 0
     text = capsys.readouterr().out
     assert f"after calibration: {d['task_rms_mm']:.4g} mm" in text
@@ -653,7 +660,8 @@ def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
     out = tmp_path / "chosen.csv"
     assert main([*args, "--json", "-o", str(out)]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["priors"] == {"joint-compliance": PRIOR} and d["bound"] is None
+    assert d["priors"] == {"joint-compliance": PRIOR} and 0 < d["bound"] <= d["value"]
+    assert 0 < d["efficiency"] <= 1
     assert d["full_rank"] and d["value"] < d["random_median"]
     chosen = jaxcal.read_markers(out, robot)
     pool = jaxcal.read_markers(files["pool"], robot)

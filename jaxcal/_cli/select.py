@@ -214,7 +214,7 @@ def _report(args, out, d) -> None:
         (
             f"efficiency {eff:.3f} against the pool's bound; "
             if eff is not None
-            else "no bound with priors (it holds for the data's information alone); "
+            else "no bound (no weighting of the pool's rows determines every parameter); "
         )
         + f"{d['exchanges']} exchanges after the {_STARTS[d['start']]}"
         + ("" if d["full_rank"] else "; the chosen rows do NOT determine every parameter")

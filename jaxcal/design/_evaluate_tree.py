@@ -10,11 +10,11 @@ parameters in the fit are those `calibrate_tree` would fit (`fitted_parameters`:
 ones the plan determines, and every one with a prior); the others are named, not
 inverted. The covariance is `(JᵀJ + diag(prior))⁻¹` on them.
 
-**Bound.** Without priors, for a plan of absolute rows: the approximate-design bound
-(`pool_bound`) over the plan's own poses and `bound_pool` poses drawn within the joint
-limits (every marker seen, the plan's median σ), for the trace of the covariance in
-typical sizes; the efficiency is `bound / trace`. With priors the bound would hold for
-the data's information alone, and a deflection plan's loads are the user's: no bound.
+**Bound.** For a plan of absolute rows: the bound of `pool_bound` (the priors'
+information included, a pose measured as often as it pays) over the plan's own poses
+and `bound_pool` poses drawn within the joint limits (every marker seen, the plan's
+median σ), for the trace of the covariance in typical sizes; the efficiency is
+`bound / trace`. A deflection plan's loads are the user's: no bound.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from .._identification.parameter_groups import (
 from .._identification.result import THRESHOLD, relative_std
 from .._markers import MarkerData, random_plan
 from .._model.tree import TreeRobot
-from ._select import pool_bound
+from ._pool_bound import pool_bound
 from ._select_tree import linearised_plan, row_blocks, task_weight
 
 __all__ = ["TreePlanEvaluation", "evaluate_tree_plan"]
@@ -152,9 +152,7 @@ def evaluate_tree_plan(
         W = task_weight(robot, table, cols, task)
         rms = float(np.sqrt(max(float(np.sum(C * W)), 0.0)) * 1e3)
     bound, eff, note = None, None, ""
-    if np.isfinite(lin.prior_std).any():
-        note = "no bound with priors (it holds for the data's information alone)"
-    elif plan.deflection or plan.force is not None or plan.moment is not None:
+    if plan.deflection or plan.force is not None or plan.moment is not None:
         note = "no bound for a plan with loads (their choice is the user's)"
     elif bound_pool == 0:
         note = "no bound (bound_pool 0)"
@@ -163,7 +161,14 @@ def evaluate_tree_plan(
         obs = np.concatenate(
             [row_blocks(lin.J, plan), row_blocks(scaled_jacobian(robot, table, extra), extra)]
         )[:, :, cols]
-        bound = pool_bound(obs, np.ones(len(obs)), len(plan.q), criterion="trace")
+        bound = pool_bound(
+            obs,
+            np.ones(len(obs)),
+            len(plan.q),
+            criterion="trace",
+            prior=lin.prior_information,
+            distinct=False,
+        )
         eff = bound / trace
         note = f"against every plan of {len(plan.q)} rows among {len(obs)} poses"
     return TreePlanEvaluation(

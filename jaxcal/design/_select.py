@@ -29,9 +29,8 @@ in the columns' units) to every subset's: `M(S) = diag(prior) + Σ_{c∈S} A_c�
 the posterior's, so that k rows can be chosen for a model with more parameters than k
 rows determine (a tree robot's calibration with priors, `select_tree_rows`).
 
-**Quality.** `pool_bound` is the approximate-design bound of the pool (as
-`design/_bound.py` for generated candidates: the multiplicative algorithm, rigorous at
-any iterate), so a selection is stated as its efficiency (`selection_efficiency`,
+**Quality.** `pool_bound` (`_pool_bound.py`) bounds every k-subset of the pool from
+below, so a selection is stated as its efficiency (`selection_efficiency`,
 `_select_pool.py`): `bound / value` for trace and task, `exp((bound − value)/p)` for
 det (D-efficiency).
 """
@@ -46,7 +45,9 @@ __all__ = [
     "SELECT_CRITERIA",
     "Selection",
     "select_rows",
-    "pool_bound",
+    "approximate_design",
+    "prepared_pool",
+    "unscale_value",
     "subset_values",
     "swap_values",
     "cholesky_inverse",
@@ -113,7 +114,7 @@ def _with_rows(inv, criterion: str, W: np.ndarray, A: np.ndarray) -> np.ndarray:
     return float(np.sum(Minv * W)) - np.trace(np.linalg.solve(S, T), axis1=1, axis2=2)
 
 
-def _prepared(obs, sigma, criterion: str, weight, prior=None):
+def prepared_pool(obs, sigma, criterion: str, weight, prior=None):
     """Checked arguments as the algorithms use them: `A` `(n, r, p)` the rows over σ with
     each column scaled to unit norm over the pool (for conditioning), the `scale`, the
     criterion's weight matrix in the scaled columns (`I` for det, unused) and the prior's
@@ -140,7 +141,7 @@ def _prepared(obs, sigma, criterion: str, weight, prior=None):
     scale = np.sqrt(np.sum(A.reshape(-1, p) ** 2, axis=0) + prior)
     scale = np.where(scale > 0, scale, 1.0)
     # The criteria change by constants: det by a fixed term, trace and task not at all
-    # with W scaled alike (`_unscale`).
+    # with W scaled alike (`unscale_value`).
     if criterion == "trace":
         W = np.diag(1.0 / scale**2)
     elif criterion == "task":
@@ -168,7 +169,7 @@ def select_rows(
     the rounded approximate design, the better result kept (or from the given `start`
     rows; module docstring); `prior` `(p,)` a Gaussian prior's information (`1/std²`
     in `obs`'s column units, 0 where none). Raises `ValueError` for bad arguments."""
-    A, scale, Wd, P0 = _prepared(obs, sigma, criterion, weight, prior)
+    A, scale, Wd, P0 = prepared_pool(obs, sigma, criterion, weight, prior)
     n, _, p = A.shape
     if not 1 <= k <= n:
         raise ValueError(f"k must be in 1..{n} (the pool's rows), got {k}")
@@ -199,8 +200,8 @@ def select_rows(
         criterion=criterion,
         value=float("inf")
         if exact is None
-        else _unscale(_value(exact, criterion, Wd), criterion, scale),
-        start_value=_unscale(start_value, criterion, scale),
+        else unscale_value(_value(exact, criterion, Wd), criterion, scale),
+        start_value=unscale_value(start_value, criterion, scale),
         exchanges=exchanges,
         full_rank=exact is not None,
         start=start_name,
@@ -226,7 +227,7 @@ def _rounded(A, P0, k: int, criterion: str, W, steps: int = _ROUNDING_STEPS) -> 
     # The approximate design's k heaviest rows (its rounding to k distinct rows): the
     # exchange then starts where the continuous optimum puts its weight. With a prior,
     # its information per row of the k (P0 / k) is part of every weight's M.
-    w, _, _ = _approximate(A, criterion, W, steps, P0 / k)
+    w, _, _ = approximate_design(A, criterion, W, steps, P0 / k)
     return [int(i) for i in np.argsort(-w, kind="stable")[:k]]
 
 
@@ -316,7 +317,7 @@ def swap_values(full, A, chosen, free, criterion: str, W) -> np.ndarray:
     return v
 
 
-def _approximate(A, criterion: str, W, steps: int, fixed=None):
+def approximate_design(A, criterion: str, W, steps: int, fixed=None):
     """The multiplicative algorithm on the pool's rows `A` (prepared): weights `w`
     (sum 1), `w_c ← w_c (d_c/φ)^λ` (trace and task: λ = 1/2; det: λ = 1), for
     `M(w) = fixed + Σ w_c A_cᵀ A_c`. Returns `(w, φ, d)` at the last iterate (`φ` and
@@ -345,7 +346,7 @@ def _approximate(A, criterion: str, W, steps: int, fixed=None):
     return w, phi, d
 
 
-def _unscale(value: float, criterion: str, scale: np.ndarray) -> float:
+def unscale_value(value: float, criterion: str, scale: np.ndarray) -> float:
     # det: log det M⁻¹ of the scaled columns − 2 Σ log scale is the unscaled one;
     # trace and task were computed with W in the scaled columns: already unscaled.
     if criterion == "det":
@@ -364,35 +365,11 @@ def subset_values(
 ) -> np.ndarray:
     """The criterion of each row subset of the pool (`select_rows`' arguments; `inf`
     where a subset does not determine every parameter), the pool prepared once."""
-    A, scale, Wd, P0 = _prepared(obs, sigma, criterion, weight, prior)
+    A, scale, Wd, P0 = prepared_pool(obs, sigma, criterion, weight, prior)
     info = np.einsum("nrp,nrq->npq", A, A)
     out = np.full(len(subsets), np.inf)
     for i, rows in enumerate(subsets):
         inv = _determined(P0 + info[np.asarray(rows)].sum(0))
         if inv is not None:
-            out[i] = _unscale(_value(inv, criterion, Wd), criterion, scale)
+            out[i] = unscale_value(_value(inv, criterion, Wd), criterion, scale)
     return out
-
-
-def pool_bound(
-    obs: np.ndarray,
-    sigma: np.ndarray,
-    k: int,
-    *,
-    criterion: str = "det",
-    weight: np.ndarray | None = None,
-    steps: int = 2000,
-) -> float:
-    """A lower bound on the criterion of every k-row subset of the pool (`select_rows`'
-    arguments): the pool's approximate optimum, by the multiplicative algorithm
-    `w_c ← w_c (d_c/φ)^λ`, bounded at the last iterate by the equivalence theorem (trace
-    and task: `φ²/max d / k`; det: `φ + p log(p/max d) − p log k`)."""
-    A, scale, Wd, _ = _prepared(obs, sigma, criterion, weight)
-    p = A.shape[-1]
-    _, phi, d = _approximate(A, criterion, Wd, steps)
-    if phi is None:
-        return float("-inf")
-    dmax = float(d.max())
-    if criterion == "det":
-        return phi + p * np.log(p / dmax) - p * np.log(k) - 2.0 * float(np.sum(np.log(scale)))
-    return phi**2 / dmax / k

@@ -13,7 +13,8 @@ from .._io import Dataset
 from .._robot import Robot
 from ._criteria import design_parameter_names
 from ._parameter_sets import k1_identifiable
-from ._select import Selection, pool_bound, select_rows, subset_values
+from ._pool_bound import pool_bound
+from ._select import Selection, select_rows, subset_values
 from ._task import observe_physical, task_weight
 
 __all__ = ["PoolSelection", "select_from_pool", "selection_efficiency"]

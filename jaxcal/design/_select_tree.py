@@ -35,7 +35,8 @@ from .._identification.parameter_groups import (
 from .._identification.pivoting import fitted_parameters
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
-from ._select import SELECT_CRITERIA, cholesky_inverse, pool_bound, select_rows, subset_values
+from ._pool_bound import pool_bound
+from ._select import SELECT_CRITERIA, cholesky_inverse, select_rows, subset_values
 from ._select_pool import PoolSelection, selection_efficiency
 
 __all__ = ["LinearisedPlan", "linearised_plan", "row_blocks", "select_tree_rows", "task_weight"]
@@ -135,8 +136,8 @@ def select_tree_rows(
     `"det"`, `"trace"` (variances in units of each parameter's typical size) or
     `"task"` (`task`: the poses the calibrated model will predict). Linearised at
     `robot`'s values. With the criterion of `random_subsets` random k-row subsets for
-    comparison, and without priors the pool's bound and the selection's efficiency
-    against it (`nan` with priors: the bound holds for the data's information alone)."""
+    comparison, and the pool's bound (`pool_bound`, the priors' information included)
+    and the selection's efficiency against it."""
     if criterion not in SELECT_CRITERIA:
         raise ValueError(f"criterion must be one of {SELECT_CRITERIA}, got {criterion!r}")
     if criterion == "task" and task is None:
@@ -156,8 +157,6 @@ def select_tree_rows(
     subsets = [rng.choice(len(pool.q), k, replace=False) for _ in range(random_subsets)]
     rand = subset_values(obs, ones, subsets, criterion=criterion, weight=W, prior=prior)
     names = tuple(p.name for p, c in zip(table, cols, strict=True) if c)
-    if np.isfinite(lin.prior_std).any():
-        return PoolSelection(sel, names, float("nan"), float("nan"), rand)
-    bound = pool_bound(obs, ones, k, criterion=criterion, weight=W)
+    bound = pool_bound(obs, ones, k, criterion=criterion, weight=W, prior=prior)
     eff = selection_efficiency(criterion, sel.value, bound, obs.shape[-1])
     return PoolSelection(sel, names, bound, eff, rand)

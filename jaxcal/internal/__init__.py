@@ -60,10 +60,10 @@ from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._tree import robot_covariance as robot_covariance, tree_rows as tree_rows
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian
+from ..design._pool_bound import pool_bound as pool_bound
 from ..design._problem import problem_criteria as problem_criteria
 from ..design._reference import pool_values as pool_values
 from ..design._select import (
-    pool_bound as pool_bound,
     subset_values as subset_values,
     swap_values as swap_values,
 )
