@@ -64,6 +64,8 @@ def pool_bound(
             return phi + p * np.log(p / dmax) - p * np.log(k) - 2.0 * float(np.sum(np.log(scale)))
         return phi**2 / dmax / k
     bound = _capped(A, Wd, P0, k, criterion, 1.0 if distinct else float(k))
+    if criterion != "det":  # a trace is never negative: so is its bound
+        bound = max(bound, 0.0)
     return unscale_value(bound, criterion, scale)
 
 
