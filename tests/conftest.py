@@ -166,12 +166,14 @@ def _release_compiled_programs():
     # (about 6 for a small one, hundreds for a vmapped equilibrium) until it is dropped,
     # and a worker runs many test files: past the kernel's limit on mappings
     # (vm.max_map_count, 65530 by default) any allocation fails and XLA aborts the
-    # process. After a file whose worker holds more than a quarter of the limit, the
-    # compiled programs are released (the next file recompiles what it needs, or reads
-    # it from the persistent cache).
+    # process. After a file whose worker holds more than half of the limit, the
+    # compiled programs are released (the next file traces again what it needs and
+    # reads it from the persistent cache). Half leaves room for the largest file (the
+    # URDF export tests add about 9000): released at a quarter, a run's workers did so
+    # 8 times and spent 1345 s; at half, 3 times and 1266 s (CPU-2, `suite_times`).
     yield
     used, limit = _mappings()
-    if limit and used > limit // 4:
+    if limit and used > limit // 2:
         jax.clear_caches()
         gc.collect()
 
