@@ -169,9 +169,10 @@ def _release_compiled_programs():
     # (vm.max_map_count, 65530 by default) any allocation fails and XLA aborts the
     # process. After a file whose worker holds more than half of the limit, the
     # compiled programs are released (the next file traces again what it needs and
-    # reads it from the persistent cache). Half leaves room for the largest file (the
-    # URDF export tests add about 9000): released at a quarter, a run's workers did so
-    # 8 times and spent 1345 s; at half, 3 times and 1266 s (CPU-2, `suite_times`).
+    # reads it from the persistent cache). Half leaves room for the largest file (one
+    # file adds at most about 10 400, measured per file): released at a quarter, a run's
+    # workers did so 8 times and spent 1345 s; at half, 3 times and 1266 s (CPU-2,
+    # `suite_times`).
     yield
     used, limit = _mappings()
     if limit and used > limit // 2:
