@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._select import approximate_design, cholesky_inverse, prepared_pool, unscale_value
+from ._select import approximate_design, prepared_pool, unscale_value, weighted_criterion
 
 __all__ = ["pool_bound"]
 
@@ -71,24 +71,13 @@ def pool_bound(
 
 def _capped(A, W, P0, k: int, criterion: str, cap: float) -> float:
     """The certificate of the relaxation over `0 ≤ w ≤ cap`, `Σ w = k` (prepared rows)."""
-    n, r, p = A.shape
+    n = len(A)
     if k > n * cap:
         raise ValueError(f"k must be at most {int(n * cap)} here, got {k}")
-    flat = A.reshape(-1, p)
-    lam, V = np.linalg.eigh(W)
-    half = V * np.sqrt(np.clip(lam, 0.0, None))  # W = half halfᵀ
 
     def value_and_gradient(w):
-        Aw = flat * np.repeat(np.sqrt(w), r)[:, None]
-        inv = cholesky_inverse(P0 + Aw.T @ Aw)
-        if inv is None:
-            return np.inf, None
-        C, logdet = inv
-        B = flat @ C  # (n r, p)
-        if criterion == "det":  # ∂ log det M⁻¹ / ∂w_c = −trace(A_c M⁻¹ A_cᵀ)
-            return logdet, -np.sum(B * flat, axis=1).reshape(n, r).sum(1)
-        G = B @ half  # ∂ trace(M⁻¹ W) / ∂w_c = −‖A_c M⁻¹ W^½‖²
-        return float(np.sum(C * W)), -np.sum(G * G, axis=1).reshape(n, r).sum(1)
+        got = weighted_criterion(A, w, criterion, W, P0)
+        return (np.inf, None) if got is None else (got[0], -got[1])
 
     def vertex(g):  # the vertex that minimises g·s: cap on the rows of lowest g
         s = np.zeros(n)

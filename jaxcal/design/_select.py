@@ -46,6 +46,7 @@ __all__ = [
     "Selection",
     "select_rows",
     "approximate_design",
+    "weighted_criterion",
     "prepared_pool",
     "unscale_value",
     "subset_values",
@@ -317,6 +318,25 @@ def swap_values(full, A, chosen, free, criterion: str, W) -> np.ndarray:
     return v
 
 
+def weighted_criterion(A, w, criterion: str, W, fixed):
+    """`(φ, d)` of the weights `w` on the pool's rows `A` (prepared): the criterion `φ` of
+    `M(w) = fixed + Σ w_c A_cᵀ A_c` and each row's sensitivity `d_c = −∂φ/∂w_c`
+    (det: `trace(A_c M⁻¹ A_cᵀ)`; trace and task: `trace(A_c M⁻¹ W M⁻¹ A_cᵀ)`), or
+    `None` when `M` is singular."""
+    n, r, p = A.shape
+    flat = A.reshape(-1, p)
+    # As matrix products of the stacked rows (BLAS), not as einsums over (n, r, p).
+    Aw = flat * np.repeat(np.sqrt(w), r)[:, None]
+    inv = cholesky_inverse(fixed + Aw.T @ Aw)
+    if inv is None:
+        return None
+    Minv, logdet = inv
+    B = flat @ Minv  # (n r, p)
+    if criterion == "det":
+        return logdet, np.sum(B * flat, axis=1).reshape(n, r).sum(1)
+    return float(np.sum(Minv * W)), np.sum((B @ W) * B, axis=1).reshape(n, r).sum(1)
+
+
 def approximate_design(A, criterion: str, W, steps: int, fixed=None):
     """The multiplicative algorithm on the pool's rows `A` (prepared): weights `w`
     (sum 1), `w_c ← w_c (d_c/φ)^λ` (trace and task: λ = 1/2; det: λ = 1), for
@@ -326,22 +346,12 @@ def approximate_design(A, criterion: str, W, steps: int, fixed=None):
     w = np.full(n, 1.0 / n)
     fixed = np.zeros((p, p)) if fixed is None else fixed
     phi, d = None, np.zeros(n)
-    flat = A.reshape(-1, p)
     for _ in range(steps):
-        # As matrix products of the stacked rows (BLAS), not as einsums over (n, r, p).
-        Aw = flat * np.repeat(np.sqrt(w), A.shape[1])[:, None]
-        inv = cholesky_inverse(fixed + Aw.T @ Aw)
-        if inv is None:
+        got = weighted_criterion(A, w, criterion, W, fixed)
+        if got is None:
             return w, None, d
-        Minv, logdet = inv
-        B = flat @ Minv  # (n r, p)
-        if criterion == "det":
-            phi, d = logdet, np.sum(B * flat, axis=1).reshape(n, -1).sum(1)
-            w = w * d
-        else:
-            phi = float(np.sum(Minv * W))
-            d = np.sum((B @ W) * B, axis=1).reshape(n, -1).sum(1)
-            w = w * np.sqrt(d)
+        phi, d = got
+        w = w * (d if criterion == "det" else np.sqrt(d))
         w = w / w.sum()
     return w, phi, d
 
