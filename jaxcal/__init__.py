@@ -123,8 +123,6 @@ from ._model.kinematics import (
     wrist_centre as wrist_centre,
 )
 from ._model.linear import (
-    cartesian_compliance as cartesian_compliance,
-    cartesian_stiffness as cartesian_stiffness,
     joint_stiffness as joint_stiffness,
     linear_deflection as linear_deflection,
 )
@@ -151,6 +149,10 @@ from ._model.spring_laws import (
     JointBacklash as JointBacklash,
     JointHardening as JointHardening,
     SpringLaw as SpringLaw,
+)
+from ._model.stiffness import (
+    cartesian_compliance as cartesian_compliance,
+    cartesian_stiffness as cartesian_stiffness,
 )
 from ._model.tree import TreeRobot as TreeRobot
 from ._model.tree_files import (

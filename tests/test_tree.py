@@ -206,6 +206,49 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data, factor, solv
     np.testing.assert_allclose(loose, rev, rtol=JACOBIAN_RTOL if plain else 10 * JACOBIAN_RTOL)
 
 
+def test_cartesian_compliance_is_the_full_models_response_to_a_small_wrench(justin, data):
+    """Eq. (18) on a tree with gravity, lateral springs and the coupled torso: the
+    compliance of the right hand's marker under a force there equals central
+    differences of the full equilibrium's marker position and rotation under wrench
+    increments (1 N, 0.1 N·m: the differences' O(h²) error is ~1e-9 of each block,
+    asserted at 1e-7), and its stiffness is its inverse."""
+    robot = _soft(justin)
+    q = jnp.asarray(data.q[3])
+    f0 = jnp.array([20.0, -10.0, -30.0])
+    at = justin.marker_names.index("right")
+    C = np.asarray(jaxcal.cartesian_compliance(robot, q, f0, at="right"))
+    K = np.asarray(jaxcal.cartesian_stiffness(robot, q, f0, at="right"))
+    np.testing.assert_allclose(K @ C, np.eye(6), rtol=0, atol=1e-9)
+    h = np.concatenate([np.full(3, 1.0), np.full(3, 0.1)])
+
+    @jax.jit
+    def responses():
+        def pose(w):
+            eq = jaxcal.tree_equilibrium(robot, q, force=f0 + w[:3], moment=w[3:], at=at)
+            # The marker's element frame and position, base frame.
+            T = jaxcal.element_frames(robot, q, eq.phi)[robot.marker_element[at]]
+            return T[:3, :3] @ robot.marker_at[at] + T[:3, 3], T[:3, :3], eq.converged
+
+        steps = jnp.diag(jnp.asarray(h))
+        p1, R1, ok1 = jax.vmap(pose)(steps)
+        p0, R0, ok0 = jax.vmap(pose)(-steps)
+        # The rotation from the minus to the plus step, as a rotation vector (small).
+        W = jnp.einsum("kij,klj->kil", R1, R0)
+        w = 0.5 * jnp.stack(
+            [W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], 1
+        )
+        return jnp.concatenate([p1 - p0, w], 1), ok1 & ok0
+
+    d, ok = responses()
+    assert bool(np.all(ok))
+    fd = np.asarray(d).T / (2 * h)
+    for rows in (slice(0, 3), slice(3, 6)):
+        for cols in (slice(0, 3), slice(3, 6)):
+            block = C[rows, cols]
+            scale = np.abs(block).max()
+            np.testing.assert_allclose(block, fd[rows, cols], rtol=0, atol=1e-7 * scale)
+
+
 def test_rows_whose_equilibrium_fails_are_named_in_one_line(justin, tmp_path, capsys):
     # Springs so soft (about 1 N·m/rad) that the arms fold under their own weight: no
     # equilibrium near the commanded pose at most rows. The command names the first rows

@@ -386,6 +386,12 @@ def test_cartesian_compliance_equals_j_kinv_jt_from_pinocchio(name):
     both = jax.jit(lambda w: (jax.jacfwd(tool)(jnp.zeros_like(w)), tool(w)))
     dCdw, dp = (np.asarray(x) for x in both(jnp.asarray(w)))
     np.testing.assert_allclose(dCdw, C[:3], rtol=0, atol=1e-9 * np.abs(C).max())
+    # Eq. (18) of the model, all six rows (rotations too): the same matrix.
+    C18 = np.asarray(jaxcal.cartesian_compliance(robot, jnp.asarray(q), at="tool"))
+    np.testing.assert_allclose(C18, C, rtol=0, atol=1e-9 * np.abs(C).max())
+    if name == "slide":  # three joints move the ram: no stiffness matrix exists
+        with pytest.raises(Exception, match="compliance is singular"):
+            jaxcal.cartesian_stiffness(robot, jnp.asarray(q), at="tool")
     second = np.abs(C).max() * np.abs(w).max() * np.abs(J).max() * max(kappa.values())
     assert np.abs(dp - C[:3] @ w).max() < 10 * second * np.abs(w).max()
 

@@ -59,6 +59,7 @@ from .tree_kinematics import (
 __all__ = [
     "law_batches",
     "potential",
+    "spring_residual",
     "TreeEquilibrium",
     "tree_equilibrium",
     "tree_deflection",
@@ -114,7 +115,7 @@ def potential(
             u = u + jnp.sum(law.potential(phi[rows, 0]))
         elif law.acts_on == "link":
             u = u + jnp.sum(law.potential(link_angles(robot, q, phi)[joints]))
-        elif law.acts_on != "torque":  # (those enter the balance: `_residual`)
+        elif law.acts_on != "torque":  # (those enter the balance: `spring_residual`)
             raise ValueError(f"spring law {law.law!r}: unknown acts_on {law.acts_on!r}")
     if force is not None:
         u = u - jnp.dot(force, marker_of_frames(robot, R, t, at))
@@ -156,7 +157,10 @@ DENSE_SPRINGS = 12
 # is a call JAX caches by its arguments' structure (its transforms reuse the one
 # jaxpr) and XLA inlines, so it costs neither compile nor run time.
 @eqx.filter_jit
-def _residual(phi, args):
+def spring_residual(phi, args):
+    """The equilibrium's condition `φ + κ ⊙ ∂V/∂φ` (less a lost-motion law's extra
+    deflection), zero at equilibrium, in rad; `args` is `(robot, q, force, moment, at)`
+    with `at` a marker index."""
     robot, q, force, moment, at = args
     compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
     compliance = jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
@@ -175,7 +179,7 @@ def _residual(phi, args):
 
 
 def _step(phi, args):
-    return phi - _residual(phi, args)
+    return phi - spring_residual(phi, args)
 
 
 def _check_load(robot, q, force, moment, at) -> int:
@@ -212,7 +216,7 @@ def tree_equilibrium(
     # Converged: one more step moves φ by at most the iteration's own tolerance (10×:
     # the solver stopped on the previous step's change, this is the next one's).
     tol = 10.0 * _tolerance(q.dtype)
-    change = jnp.max(jnp.abs(_residual(phi, (robot, q, force, moment, at))))
+    change = jnp.max(jnp.abs(spring_residual(phi, (robot, q, force, moment, at))))
     ok = (change <= tol * (1.0 + jnp.max(jnp.abs(phi)))) & jnp.all(jnp.isfinite(phi))
     return TreeEquilibrium(phi=phi, converged=ok)
 
@@ -245,7 +249,7 @@ def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative
     phi0 = jnp.zeros((len(robot.revolute), 3), q.dtype)
     # The rigid robot's deflections are the torques times the compliances: one
     # fixed-point step gives a start within the springs' second-order effect.
-    phi0 = phi0 - _residual(phi0, args)
+    phi0 = phi0 - spring_residual(phi0, args)
     sol = optx.fixed_point(
         _step,
         _solver(robot, tol),
