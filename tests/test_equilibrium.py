@@ -282,6 +282,14 @@ def test_eq18_moment_columns(robot, rows, compliance):
     np.testing.assert_allclose(central, compliance[i, :3, 3:] @ np.asarray(M), rtol=1e-6)
 
 
+def test_eq18_of_a_robot_with_model_effects_is_named_as_unsupported(robot):
+    """Eq. (18) is computed on the robot's tree, which has no form for the discrepancy
+    workflow's effects: a named error before any work, not a wrong matrix."""
+    r = eqx.tree_at(lambda r: r.effects, robot, (jaxcal.Backlash(1, 50.0),))
+    with pytest.raises(ValueError, match=r"robot: eq\. \(18\) is computed on the robot's tree"):
+        jaxcal.cartesian_stiffness(r, jnp.zeros(6))
+
+
 def test_h_theta_theta_term_matters(robot, rows, compliance):
     """Without the H_θθ term (gravity's second derivatives at the gravity-sagged pose)
     the compliance is off by ~1e-3 relative; eq. (5) (θ = 0, no gravity) misses the full
