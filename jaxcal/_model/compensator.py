@@ -23,7 +23,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._robot import Robot
-from .spring_laws import compensator_length
+from .spring_laws import CompensatorLaw, compensator_length
 
 __all__ = [
     "spring_length",
@@ -46,8 +46,10 @@ def _length(lc, l2, phi2):
 
 
 def spring_energy(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:
-    s = _spring_length(robot, phi2)
-    v = 0.5 * robot.Kc * (s - robot.s0) ** 2
+    # The law of every robot's compensator (a tree's spring law), with this robot's
+    # constants: one home for its energy.
+    law = CompensatorLaw(lc=robot.lc, l2=robot.l2c, Kc=robot.Kc, s0=robot.s0, joint=1)
+    v = law.potential(phi2)
     return v if robot.has_compensator else jnp.zeros_like(v)
 
 
