@@ -49,7 +49,7 @@ def spring_energy(robot: Robot, phi2: Float[ArrayLike, ""]) -> Float[Array, ""]:
     # The law of every robot's compensator (a tree's spring law), with this robot's
     # constants: one home for its energy.
     law = CompensatorLaw(lc=robot.lc, l2=robot.l2c, Kc=robot.Kc, s0=robot.s0, joint=1)
-    v = law.potential(phi2)
+    v = law.potential(jnp.asarray(phi2))
     return v if robot.has_compensator else jnp.zeros_like(v)
 
 
