@@ -149,6 +149,14 @@ def main():
             1e-8,
         )
     )
+    rows.append(
+        stages(
+            "cartesian stiffness (1000 poses)",
+            lambda r, q: jax.vmap(lambda a: jaxcal.cartesian_stiffness(r, a))(q),
+            robot,
+            path.q,
+        )
+    )
     design = data.with_deflection(None)
     rows.append(
         first_second(
