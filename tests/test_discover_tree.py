@@ -98,6 +98,25 @@ def _measured(truth, q: np.ndarray, sigma: float, seed: int | None = 5):
     return jaxcal.MarkerData(q=q, markers=y, seen=plan.seen, sigma=plan.sigma)
 
 
+def test_eq18_of_the_upright_pendulum_and_its_toppling():
+    """Upright (q = 90°) the weight has no torque, but a toppling stiffness m·g·L
+    (588.6 N·m/rad) against the spring's 1/κ: the tip's compliance along x and about y
+    are L²/(1/κ − m·g·L) and 1/(1/κ − m·g·L) (eq. 18's gravity term). A spring softer
+    than the weight (κ·m·g·L = 2.9) leaves the upright pose an equilibrium, found as
+    one, but a saddle: its compliance is refused."""
+    q, mgl = jnp.array([np.pi / 2]), PEND_M * 9.80665 * PEND_L
+    kappa = 1e-3  # rad/(N·m): 1/κ − m·g·L = 411.4 N·m/rad
+    C = np.asarray(jaxcal.cartesian_compliance(_pendulum(kappa, None), q, at="tip"))
+    k = 1.0 / kappa - mgl
+    assert C[0, 0] == pytest.approx(PEND_L**2 / k, rel=1e-9)
+    assert C[4, 4] == pytest.approx(1.0 / k, rel=1e-9)
+    soft = _pendulum(5e-3, None)
+    eq = jaxcal.tree_equilibrium(soft, q)
+    assert bool(eq.converged) and abs(float(eq.phi[0, 0])) < 1e-12
+    with pytest.raises(Exception, match="not stable"):
+        jaxcal.cartesian_compliance(soft, q, at="tip")
+
+
 @pytest.mark.parametrize("q", [0.0, 0.5, -1.0])
 def test_joint_hardening_against_the_analytic_pendulum(q):
     # The mass sits at height L·sin(q + θ) (x along the arm, the axis along −y), so the
