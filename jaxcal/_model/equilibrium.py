@@ -28,7 +28,7 @@ from .._solution import RESULTS, result_of
 from .compensator import spring_energy as _compensator_potential
 from .effects import collect_effects, observe_effects
 from .kinematics import forward, mass_positions
-from .rotations import vee_rotation_derivative
+from .rotations import angular_jacobian
 
 __all__ = [
     "Equilibrium",
@@ -85,10 +85,12 @@ def equilibrium_residual(x, args):
     if moment is not None:
         # Generalised force of a moment: Qi = M·ωi with ωi the tool frame's base-frame
         # angular velocity per unit ẋi (no potential exists for a finite rotation).
-        _, R = tool_pose(robot, q, x)
-        JR = jax.jacfwd(lambda y: tool_pose(robot, q, y)[1])(x)
-        Jw = jax.vmap(lambda dR: vee_rotation_derivative(dR, R), in_axes=2, out_axes=1)(JR)
-        g = g - Jw.T @ moment
+        def rotation(y):
+            R = tool_pose(robot, q, y)[1]
+            return R, R
+
+        JR, R = jax.jacfwd(rotation, has_aux=True)(x)
+        g = g - angular_jacobian(JR, R).T @ moment
     # Scaling by the compliances makes the residual a deflection (rad), on the scale of x,
     # so Newton's tolerances are meaningful in both spaces.
     return g * scale

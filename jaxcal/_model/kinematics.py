@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._robot import Robot
-from .rotations import Rx, Ry, Rz, so3_exp, vee_rotation_derivative
+from .rotations import Rx, Ry, Rz, angular_jacobian, so3_exp
 
 __all__ = [
     "Pose",
@@ -139,9 +139,7 @@ def jacobian_theta(
 
     def pose(th):
         P = forward(robot, q, th)
-        return P.p_tool, P.Rw
+        return (P.p_tool, P.Rw), P.Rw
 
-    _, R = pose(theta)
-    Jp, JR = jax.jacfwd(pose)(theta)
-    Jw = jax.vmap(lambda dR: vee_rotation_derivative(dR, R), in_axes=2, out_axes=1)(JR)
-    return jnp.concatenate([Jp, Jw], axis=0)
+    (Jp, JR), R = jax.jacfwd(pose, has_aux=True)(theta)
+    return jnp.concatenate([Jp, angular_jacobian(JR, R)], axis=0)

@@ -7,11 +7,21 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["Rx", "Ry", "Rz", "rpy_from_matrix", "skew", "so3_exp", "vee_rotation_derivative"]
+__all__ = [
+    "Rx",
+    "Ry",
+    "Rz",
+    "angular_jacobian",
+    "rpy_from_matrix",
+    "skew",
+    "so3_exp",
+    "vee_rotation_derivative",
+]
 
 
 def Rx(a: Float[Array, ""]) -> Float[Array, "3 3"]:
@@ -65,6 +75,13 @@ def vee_rotation_derivative(dR: Float[Array, "3 3"], R: Float[Array, "3 3"]) -> 
     # dR·Rᵀ is skew-symmetric; average both halves so round-off does not favour one.
     W = dR @ R.T
     return 0.5 * jnp.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+
+
+def angular_jacobian(JR: Float[Array, "3 3 n"], R: Float[Array, "3 3"]) -> Float[Array, "3 n"]:
+    """The base-frame angular velocity of the rotation `R` per unit of each of `n`
+    inputs, from `JR`, the derivatives of `R` with respect to them (last axis, as
+    `jax.jacfwd` gives them)."""
+    return jax.vmap(lambda dR: vee_rotation_derivative(dR, R), in_axes=2, out_axes=1)(JR)
 
 
 def rpy_from_matrix(R: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ from .._linalg.dense import is_positive_definite, lu_factor, lu_solve
 from .._linalg.solvers import cholesky_solver
 from .._robot import Robot
 from .._robot_tree import as_tree
-from .rotations import vee_rotation_derivative
+from .rotations import angular_jacobian
 from .tree import TreeRobot
 from .tree_kinematics import marker_index, marker_pose
 from .tree_statics import spring_residual, tree_equilibrium
@@ -61,15 +61,13 @@ def compliance_at(
 
     def pose(v):
         R, p = marker_pose(robot, q, full(v), at)
-        return p, R
+        return (p, R), R
 
     v0 = phi.reshape(-1)[rows]
     w0 = jnp.zeros(6, q.dtype)
     A, B = jax.jacfwd(residual, argnums=(0, 1))(v0, w0)
-    Jp, JR = jax.jacfwd(pose)(v0)
-    R = pose(v0)[1]
-    Jw = jax.vmap(lambda dR: vee_rotation_derivative(dR, R), in_axes=2, out_axes=1)(JR)
-    J = jnp.concatenate([Jp, Jw], axis=0)
+    (Jp, JR), R = jax.jacfwd(pose, has_aux=True)(v0)
+    J = jnp.concatenate([Jp, angular_jacobian(JR, R)], axis=0)
     lu, perm = lu_factor(A)
     X = jax.vmap(lambda b: lu_solve(lu, perm, -b), in_axes=1, out_axes=1)(B)
     C = J @ X
