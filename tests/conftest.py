@@ -46,7 +46,7 @@ gc.set_threshold(100_000, 50, 1000)
 # only runs later; a stale figure only costs balance.
 _SLOWEST_FILES = {
     "test_design_bound.py": 151,
-    "test_tree.py": 145,
+    "test_tree.py": 100,
     "test_quasi_serial.py": 115,
     "test_discrepancy.py": 110,
     "test_discover_tree.py": 82,

@@ -717,40 +717,6 @@ def test_cli_selects_rows_of_a_marker_pool(data, tmp_path, capsys):
     )
 
 
-#: Weak priors on every group, centred on the robot file's values (frames mm/deg, offsets
-#: deg, DH mm/deg, springs µrad/(N·m), the file's springs being rigid): those of
-#: `benchmarks/bench_justin_subsets.py`, whose study this test samples.
-SUBSET_PRIORS = {
-    "frames": 100.0,
-    "joint-offsets": 2.0,
-    "dh": 5.0,
-    "joint-compliance": 100.0,
-    "lateral-compliance": 100.0,
-}
-
-
-@pytest.mark.usefixtures("optimised_test")  # fits of 100 and 300 poses
-def test_100_chosen_rows_come_within_10_percent_of_all_300(justin, data):
-    """The published protocol's split (200 rows held out, seed 0): 100 of the 300 training
-    rows chosen by the task criterion for the test poses (not their measurements),
-    calibrated with the same priors as all 300, leave a held-out mean marker error within
-    10 % of all 300's."""
-    train, test = split_rows(len(data.q), 200, 0)
-    pool, task = data.subset(train), data.subset(test)
-    out = jaxcal.select_tree_rows(
-        justin, pool, 100, criterion="task", priors=SUBSET_PRIORS, task=task, random_subsets=0
-    )
-
-    def held_out(rows):
-        cal = jaxcal.calibrate_tree(justin, pool.subset(np.sort(rows)), priors=SUBSET_PRIORS)
-        assert cal.converged, cal.message
-        return float(jaxcal.marker_errors(cal.robot, task).mean())
-
-    chosen, everything = held_out(out.selection.rows), held_out(np.arange(len(train)))
-    print(f"held-out mean: 100 chosen {chosen * 1e3:.3f} mm, all 300 {everything * 1e3:.3f} mm")
-    assert chosen <= 1.1 * everything
-
-
 @pytest.mark.parametrize(
     "priors, needle",
     [
