@@ -264,6 +264,7 @@ def test_candidates_are_families_per_place(justin):
         jaxcal.tree_candidates(justin, ("frames",), ("bending",))
 
 
+@pytest.mark.usefixtures("optimised_test")  # its programs serve the test below too
 def test_simulated_lateral_springs_are_named_where_they_are(justin, data):
     rev = jnp.asarray(justin.revolute)
     c = justin.compliance.at[rev, 0].set(8e-6)
