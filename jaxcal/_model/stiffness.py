@@ -34,7 +34,7 @@ from .._robot_tree import as_tree
 from .rotations import angular_jacobian
 from .tree import TreeRobot
 from .tree_kinematics import marker_index, marker_pose
-from .tree_statics import spring_residual, tree_equilibrium
+from .tree_statics import check_load, spring_compliance, spring_residual, tree_equilibrium
 
 __all__ = ["cartesian_compliance", "cartesian_stiffness", "compliance_at"]
 
@@ -73,7 +73,7 @@ def compliance_at(
     C = J @ X
     # Stability: `A = I + κ∇²V` scaled to `I + κ^½ ∇²V κ^½`; a rigid spring's row
     # (κ = 0, `A`'s row the identity's) is no direction of motion.
-    kappa = robot.compliance[jnp.asarray(robot.revolute, int)].reshape(-1)[rows]
+    kappa = spring_compliance(robot).reshape(-1)[rows]
     s = jnp.sqrt(jnp.clip(kappa, 0.0, None))
     rigid = s == 0.0
     safe = jnp.where(rigid, 1.0, s)
@@ -92,14 +92,8 @@ def _prepared(robot, q, force, at):
     tree = as_tree(robot) if isinstance(robot, Robot) else robot
     if not isinstance(tree, TreeRobot):
         raise ValueError(f"robot must be a Robot or a TreeRobot, got {type(robot).__name__}")
+    check_load(tree, q, force, None, at)
     dtype = tree.compliance.dtype
-    if jnp.shape(q) != (tree.n_joints,):
-        raise ValueError(
-            f"q must have shape ({tree.n_joints},) (one configuration; vmap for more), "
-            f"got {jnp.shape(q)}"
-        )
-    if force is not None and jnp.shape(force) != (3,):
-        raise ValueError(f"force must have shape (3,) or be None, got {jnp.shape(force)}")
     q = jnp.asarray(q, dtype)
     force = jnp.zeros(3, dtype) if force is None else jnp.asarray(force, dtype)
     return tree, q, force, marker_index(tree, at)

@@ -59,6 +59,8 @@ from .tree_kinematics import (
 __all__ = [
     "law_batches",
     "potential",
+    "check_load",
+    "spring_compliance",
     "spring_residual",
     "TreeEquilibrium",
     "tree_equilibrium",
@@ -150,6 +152,13 @@ DERIVATIVE_RTOL = 1e-6
 DENSE_SPRINGS = 12
 
 
+def spring_compliance(robot: TreeRobot) -> Float[Array, "r 3"]:
+    """Each moving element's spring compliances `(z, x, y)` (rad/(N·m), or m/N along a
+    slide), zero where the element has no such spring."""
+    compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
+    return jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
+
+
 # Traced once per robot structure and argument shapes, then reused: the residual (the
 # gradient of the potential through the whole tree) is the largest piece of every
 # program around the equilibrium, and the fixed point, its implicit derivative, the
@@ -162,8 +171,7 @@ def spring_residual(phi, args):
     deflection), zero at equilibrium, in rad; `args` is `(robot, q, force, moment, at)`
     with `at` a marker index."""
     robot, q, force, moment, at = args
-    compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
-    compliance = jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
+    compliance = spring_compliance(robot)
     # The generalised force of a moment, M·ω per unit deflection, is the gradient of
     # `potential`'s moment term at the frame's own rotation: it shares gravity's one
     # reverse pass instead of one forward pass per spring to differentiate the
@@ -182,9 +190,14 @@ def _step(phi, args):
     return phi - spring_residual(phi, args)
 
 
-def _check_load(robot, q, force, moment, at) -> int:
-    if q.shape != (robot.n_joints,):
-        raise ValueError(f"q must have shape ({robot.n_joints},), got {q.shape}")
+def check_load(robot, q, force, moment, at) -> int:
+    """Named `ValueError`s for a configuration and wrench of the wrong shape; the index
+    of marker `at` where a wrench acts there (else 0)."""
+    if jnp.shape(q) != (robot.n_joints,):
+        raise ValueError(
+            f"q must have shape ({robot.n_joints},) (one configuration; vmap for more), "
+            f"got {jnp.shape(q)}"
+        )
     for name, x in (("force", force), ("moment", moment)):
         if x is not None and jnp.shape(x) != (3,):
             raise ValueError(f"{name} must have shape (3,) or be None, got {jnp.shape(x)}")
@@ -209,7 +222,7 @@ def tree_equilibrium(
     the springs balance, at commanded angles `q` (rad). Differentiable in every array
     field of `robot` by the implicit function theorem, to `derivative_rtol` relative
     (see `DERIVATIVE_RTOL`); never raises for values (check `converged`)."""
-    at = _check_load(robot, q, force, moment, at)
+    at = check_load(robot, q, force, moment, at)
     phi = _fixed_point(
         robot, q, force, moment, at=at, max_steps=max_steps, derivative_rtol=derivative_rtol
     )
@@ -297,7 +310,7 @@ def tree_deflection(
     """What a deflection experiment measures: the displacement (m, base frame) of
     marker `at` when the wrench is applied, loaded minus unloaded (gravity only) at the
     same commanded angles `q`; and whether both equilibria converged."""
-    i = _check_load(robot, q, force, moment, at)
+    i = check_load(robot, q, force, moment, at)
     loaded = tree_equilibrium(robot, q, force=force, moment=moment, at=i)
     free = tree_equilibrium(robot, q)
     p1 = marker_pose(robot, q, loaded.phi, i)[1]
