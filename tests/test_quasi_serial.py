@@ -409,10 +409,11 @@ def test_discover_on_deflection_data_of_the_tree(tree_file, capsys):
 def test_discover_names_a_stiff_joints_hardening_where_it_is(tree_file, tmp_path, capsys):
     """A joint-stiffness nonlinearity hidden at the FANUC's joint 3 (`h` = 0.03 J: 2 % of
     the joint's stiffness at 1 mrad; its compliance, 0.22 µrad/(N·m), is 45 times below
-    the typical size the pivoting measures it in), the example plan's deflections
-    simulated with σ = 0.02 mm: the discovery names it there and sizes it within 4 std
-    (the fit's pivoting alone would hold it beside the joint's far larger compliance
-    column, and the search would name a hardening at joint 5 instead)."""
+    a light robot's), the example plan's deflections simulated with σ = 0.02 mm: the
+    discovery names it there and sizes it within 4 std. The trial fit's set is picked
+    with each compliance measured in its own size: in a constant typical size, the
+    joint's compliance column dwarfed the hardening's, the pivoting held it, and the
+    search named a backlash at joint 3 or a hardening at joint 5."""
     truth = json.loads(tree_file.read_text())
     truth["spring_laws"].append({"law": "joint_hardening", "joint": "q3", "h_J": 0.03})
     (tmp_path / "truth.json").write_text(json.dumps(truth))

@@ -47,6 +47,7 @@ from .parameter_groups import (
     default_groups,
     get_vector,
     parameter_table,
+    pivot_units,
     prior_stds,
     set_vector,
 )
@@ -302,7 +303,7 @@ def _calibrate(
     if chosen is None:
         # The start Jacobian, only where the pivoting has parameters to choose among.
         start = lambda: scaled_jacobian(robot, table, data).reshape(-1, len(table))
-        fitted = fitted_parameters(start, want, has_prior, rcond)
+        fitted = fitted_parameters(start, want, has_prior, rcond, pivot_units(robot, table))
     else:
         if np.shape(chosen) != (len(table),):
             raise ValueError(f"fitted must have shape ({len(table)},), got {np.shape(chosen)}")

@@ -41,6 +41,7 @@ __all__ = [
     "parameter_table",
     "get_vector",
     "set_vector",
+    "pivot_units",
     "parse_groups",
     "default_groups",
     "PriorSpec",
@@ -239,6 +240,24 @@ def set_vector(robot: TreeRobot, table: tuple[Parameter, ...], p: Float[Array, "
     return eqx.tree_at(
         lambda r: tuple(_field(r, f) for f in fields), robot, tuple(new(f) for f in fields)
     )
+
+
+#: Groups whose parameters are magnitudes sized by the robot's own values.
+_OWN_SIZE = ("joint-compliance", "lateral-compliance", "spring-laws")
+
+
+def pivot_units(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
+    """Host-side: `(P,)` each parameter's typical size at `robot`'s values, in units of
+    its `Parameter.scale`: a compliance's or a spring law's own magnitude where it is not
+    0, else its `scale` (1). The pivoting that picks the fitted set compares columns in
+    these units: a joint 45 times stiffer than the constant typical size (the FANUC's
+    against Agile Justin's) would otherwise dwarf a spring law that the data determine
+    well. `scale` itself stays a constant of the group, so that the programs compiled
+    for a robot serve every robot of the same shape."""
+    p0 = np.abs(np.asarray(get_vector(robot, table), float))
+    scale = np.array([p.scale for p in table])
+    own = np.array([p.group in _OWN_SIZE for p in table], bool)
+    return np.where(own & (p0 > 0), p0 / scale, 1.0)
 
 
 #: The full calibration from deflection data: the springs. A deflection is the response

@@ -57,13 +57,16 @@ def fitted_parameters(
     want: np.ndarray,
     has_prior: np.ndarray,
     rcond: float = PIVOT_RCOND,
+    units: np.ndarray | None = None,
 ) -> np.ndarray:
     """Host-side: `(P,)` bools, the parameters a calibration fits of those it `want`s:
     every one with a prior (the prior determines what the data do not), and of the
     others those `pivoted_subset` picks from the scaled Jacobian `jacobian()` `(m, P)`,
-    computed only where some are left to choose among."""
+    computed only where some are left to choose among, its columns multiplied by
+    `units` (`pivot_units`: each parameter's typical size at the robot's values)."""
     fitted = want & has_prior
     pivot = want & ~has_prior
     if pivot.any():
-        fitted[pivot] = pivoted_subset(jacobian()[:, pivot], rcond)
+        J = jacobian() if units is None else jacobian() * units
+        fitted[pivot] = pivoted_subset(J[:, pivot], rcond)
     return fitted

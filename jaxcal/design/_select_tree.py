@@ -30,6 +30,7 @@ from .._identification.parameter_groups import (
     PriorSpec,
     default_groups,
     parameter_table,
+    pivot_units,
     prior_stds,
 )
 from .._identification.pivoting import fitted_parameters
@@ -99,7 +100,8 @@ def linearised_plan(
     prior = prior_stds(robot, table, priors)
     has_prior = np.isfinite(prior)
     J = scaled_jacobian(robot, table, plan)  # (m, 3, P): σ-weighted, typical-size units
-    cols = fitted_parameters(lambda: J.reshape(-1, P), np.ones(P, bool), has_prior)
+    units = pivot_units(robot, table)
+    cols = fitted_parameters(lambda: J.reshape(-1, P), np.ones(P, bool), has_prior, units=units)
     scale = np.array([p.scale for p in table])
     info = np.where(has_prior, (scale / np.where(has_prior, prior, 1.0)) ** 2, 0.0)[cols]
     A = J.reshape(-1, P)[:, cols]

@@ -280,7 +280,7 @@ def discover_tree(
     cols = [np.array([index[n] for n in c.names]) for c in cands]
     positive = positive_parameters(robot, table)
 
-    def calibrate(chosen: list[int], fitted: np.ndarray | None = None) -> TreeCalibration:
+    def calibrate(chosen: list[int]) -> TreeCalibration:
         on = {n for i in chosen for n in cands[i].names}
         fit_groups = tuple(
             g for g in groups if g in nominal or any(cands[i].group == g for i in chosen)
@@ -290,8 +290,9 @@ def discover_tree(
             for p in table
             if p.group not in nominal and p.group in fit_groups and p.name not in on
         )
-        kw = {"fit_groups": fit_groups, "hold": hold, "fitted": fitted}
-        return calibrate_tree(robot, data, groups, max_steps=max_steps, **kw)
+        return calibrate_tree(
+            robot, data, groups, fit_groups=fit_groups, hold=hold, max_steps=max_steps
+        )
 
     say(f"calibrating the nominal model ({', '.join(nominal)})")
     nom = cal = calibrate(chosen=[])
@@ -312,17 +313,6 @@ def discover_tree(
             break
         say(f"fitting {', '.join(cands[i].label for i, _ in added)} with the full model")
         trial = calibrate(chosen + [i for i, _ in added])
-        # The fit's pivoting, in typical sizes, may drop a column the screening found
-        # decisive (a stiff robot's hardening beside its joint's compliance): a family
-        # whose columns the screening found independent of the fitted ones is fitted.
-        force = [
-            i for i, step in added if not trial.fitted[cols[i]].all() and step["k"] == len(cols[i])
-        ]
-        if force:
-            fitted = trial.fitted.copy()
-            for i in force:
-                fitted[cols[i]] = True
-            trial = calibrate(chosen + [i for i, _ in added], fitted)
         for i, step in added:
             # The fit's own pivoting (at the robot file's values) may still find a family
             # redundant with the others: then it is not named, nor proposed again.
@@ -352,17 +342,21 @@ def discover_tree(
                 units[n] = p.unit
                 if not positive[k]:
                     signed.append(n)
-        same = ("delta_rss", "delta_bic", "k", "loo_before_mm", "loo_after_mm")
-        same += ("change_rms_mm", "change_max_mm")
         effects.append(
             TreeEffect(
                 candidate=cands[i],
+                delta_rss=step["delta_rss"],
+                delta_bic=step["delta_bic"],
+                k=step["k"],
+                loo_before_mm=step["loo_before_mm"],
+                loo_after_mm=step["loo_after_mm"],
+                change_rms_mm=step["change_rms_mm"],
+                change_max_mm=step["change_max_mm"],
                 params=params,
                 units=units,
                 signed=tuple(signed),
                 rival=step.get("rival"),
                 rival_delta_bic=step.get("rival_delta_bic"),
-                **{k: step[k] for k in same},
             )
         )
     told = None
