@@ -24,7 +24,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import jaxcal
-from jaxcal.internal import gravity_potential
+from jaxcal.internal import Rx, Ry, Rz, gravity_potential, rpy_from_matrix
 
 ROBOT_DATA = Path(
     str(
@@ -293,6 +293,25 @@ SLIDE_URDF = """<?xml version="1.0"?>
   </joint>
 </robot>
 """
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(
+    roll=st.floats(-math.pi, math.pi),
+    yaw=st.floats(-math.pi, math.pi),
+    gap=st.floats(-11.0, -1.0),
+    sign=st.sampled_from([-1.0, 1.0]),
+)
+def test_rpy_near_the_gimbal_lock_rebuild_the_rotation(roll, yaw, gap, sign):
+    """Roll, pitch, yaw of `Rz(yaw) Ry(pitch) Rx(roll)` with the pitch 1e-11 to 0.1 rad
+    from ±90° (a calibrated origin beside a URDF's right angle, as the UR5's) rebuild
+    the rotation to round-off: a few ulp of its entries. Roll and yaw alone each come
+    from entries of size cos(pitch) and were off by up to 7e-5 rad in the rotation."""
+    pitch = sign * (math.pi / 2 - 10.0**gap)
+    R = np.asarray(Rz(jnp.asarray(yaw)) @ Ry(jnp.asarray(pitch)) @ Rx(jnp.asarray(roll)))
+    r, p, y = rpy_from_matrix(R)
+    back = np.asarray(Rz(jnp.asarray(y)) @ Ry(jnp.asarray(p)) @ Rx(jnp.asarray(r)))
+    assert np.abs(back - R).max() <= 8 * np.finfo(np.float64).eps
 
 
 @functools.cache

@@ -94,5 +94,32 @@ def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
     c = math.hypot(R[0, 0], R[1, 0])
     pitch = math.atan2(-R[2, 0], c)
     if c < 1e-12:  # gimbal lock: put the whole turn into roll
-        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
-    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
+        rpy = np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
+    else:
+        rpy = np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
+    # Near pitch ±90° roll and yaw come from entries of size cos(pitch), each off by
+    # eps/cos(pitch), and the rotation they give with them (a calibrated URDF origin at
+    # 5e-12 from the lock: 6e-11 rad). Gauss–Newton steps on the rotation itself mend
+    # what the angles can express; the split between roll and yaw that the lock leaves
+    # undetermined (singular values below 1e-10) is left as it is.
+    for _ in range(2):
+        r, p, y = rpy
+        E = _rpy_matrix(r, p, y).T @ R
+        w = 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+        cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)
+        # The body-frame angular velocity per unit of (roll, pitch, yaw).
+        J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+        rpy = rpy + np.linalg.lstsq(J, w, rcond=1e-10)[0]
+    return rpy
+
+
+def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
+    # Host-side `Rz(y) Ry(p) Rx(r)`.
+    cr, sr, cp, sp, cy, sy = (f(a) for a in (r, p, y) for f in (math.cos, math.sin))
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )

@@ -51,7 +51,7 @@ from .._linalg.iterative import (
 )
 from .._linalg.solvers import linalg_backend as linalg_backend
 from .._model.candidates import THETA_REF as THETA_REF
-from .._model.rotations import Ry as Ry
+from .._model.rotations import Rx as Rx, Ry as Ry, Rz as Rz, rpy_from_matrix as rpy_from_matrix
 from .._model.simulate import batch_deflections as batch_deflections
 from .._model.tree_kinematics import gravity_potential as gravity_potential
 from .._model.tree_statics import DERIVATIVE_RTOL as DERIVATIVE_RTOL
