@@ -395,27 +395,37 @@ def test_discover_on_deflection_data_of_the_tree(tree_file, capsys):
     come from the model itself (the compensator included) with noise, so no candidate
     is decisive (ΔBIC ≥ 10 on noise alone has probability ~1e-5 per family), as the
     FANUC-form model's discover answers on the same file. Deflections do not determine
-    the geometry: the nominal model is the spring groups, as for identify."""
+    the geometry: the nominal model is the spring groups, as for identify; the FANUC's
+    file gives its joints no lateral springs, so those are candidates, not nominal."""
     args = ["discover", str(DATA / "example_calibration.csv"), "--robot", str(tree_file), "--json"]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     # Fitted from deflections the nominal model is the spring groups, as identify's.
-    assert out["nominal_groups"] == list(jaxcal.DEFLECTION_GROUPS)
+    assert jaxcal.DEFLECTION_GROUPS == ("joint-compliance", "lateral-compliance")
+    assert out["nominal_groups"] == ["joint-compliance"]
     assert out["effect"] == "none" and out["effects"] == [], out["effect"]
     best = out["steps"][0]
     assert not best["chosen"] and best["delta_bic"] < 10, best
 
 
-def test_discover_names_a_stiff_joints_hardening_where_it_is(tree_file, tmp_path, capsys):
-    """A joint-stiffness nonlinearity hidden at the FANUC's joint 3 (`h` = 0.03 J: 2 % of
-    the joint's stiffness at 1 mrad; its compliance, 0.22 µrad/(N·m), is 45 times below
-    a light robot's), the example plan's deflections simulated with σ = 0.02 mm: the
-    discovery names it there and sizes it within 4 std. The trial fit's set is picked
-    with each compliance measured in its own size: in a constant typical size, the
-    joint's compliance column dwarfed the hardening's, the pivoting held it, and the
-    search named a backlash at joint 3 or a hardening at joint 5."""
+def test_discover_names_a_stiff_joints_hardening_and_a_bending_where_they_are(
+    tree_file, tmp_path, capsys
+):
+    """Two effects hidden in the FANUC: a joint-stiffness nonlinearity at joint 3 (`h` =
+    0.03 J: 2 % of the joint's stiffness at 1 mrad; its compliance, 0.22 µrad/(N·m), is
+    45 times below a light robot's) and lateral springs at joint 2 (0.1 µrad/(N·m)
+    each: the lower arm bending out of its plane and twisting), which its file does not
+    have; the example plan's deflections simulated with σ = 0.02 mm. The discovery
+    names both where they are and sizes them within 4 std. The trial fit's set is
+    picked with each spring measured in the robot's own sizes: in a constant typical
+    size (a light robot's), the lateral candidates' and the joint's compliance columns
+    dwarfed the hardening's, the pivoting held it, and the search named a hardening at
+    joint 5 and a backlash at joint 3 instead."""
     truth = json.loads(tree_file.read_text())
     truth["spring_laws"].append({"law": "joint_hardening", "joint": "q3", "h_J": 0.03})
+    (j2,) = [e for e in truth["elements"] if e["name"] == "J2"]
+    j2["compliance_urad_per_Nm"][1:] = [0.1, 0.1]
+    j2["springs"] = ["theta", "alpha", "beta"]
     (tmp_path / "truth.json").write_text(json.dumps(truth))
     meas = tmp_path / "measured.csv"
     sim = ["simulate", str(DATA / "example_calibration.csv"), "-o", str(meas)]
@@ -423,9 +433,13 @@ def test_discover_names_a_stiff_joints_hardening_where_it_is(tree_file, tmp_path
     capsys.readouterr()
     assert main(["discover", str(meas), "--robot", str(tree_file), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["where"] == {"spring-laws": ["joint_hardening[q3]"]}, out["steps"][:3]
-    ((h,),) = [e["size"] for e in out["effects"]]
-    assert h["unit"] == "J" and abs(h["value"] - 0.03) <= 4 * h["std"], h
+    want = {"spring-laws": ["joint_hardening[q3]"], "lateral-compliance": ["J2"]}
+    assert out["where"] == want, out["steps"][:3]
+    sizes = {d["name"]: d for e in out["effects"] for d in e["size"]}
+    assert set(sizes) == {"joint_hardening3.h", "J2.k_alpha", "J2.k_beta"}
+    for name, d in sizes.items():
+        true = 0.03 if name.endswith(".h") else 0.1
+        assert abs(d["value"] - true) <= 4 * d["std"], d
 
 
 def test_lateral_springs_before_or_after_the_joint():

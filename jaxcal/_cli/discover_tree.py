@@ -99,7 +99,12 @@ def run_tree(args: argparse.Namespace) -> int:
     from .._identification.tree_validation import marker_errors, split_rows
     from .._markers import read_markers
     from ..discrepancy._tree import discover_tree
-    from ..discrepancy._tree_candidates import candidate_groups, candidate_robot, tree_candidates
+    from ..discrepancy._tree_candidates import (
+        candidate_groups,
+        candidate_robot,
+        fitted_nominal,
+        tree_candidates,
+    )
 
     check_output_path(args.plot, "--plot", inputs={"the data file": args.data}, size=1_000_000)
     check_outputs(args)
@@ -111,15 +116,17 @@ def run_tree(args: argparse.Namespace) -> int:
         if args.candidates is None
         else parse_groups(args.candidates, robot)
     )
+    nominal = fitted_nominal(robot, nominal, look)
     compensators = tuple(j.strip() for j in (args.compensator_at or "").split(",") if j.strip())
     if args.compensator_at is not None and not compensators:
         raise ValueError("--compensator-at: names no joint")
-    with_laws = "spring-laws" in look and "spring-laws" not in nominal
-    if compensators and not with_laws:
+    laws = "spring-laws" in look and "spring-laws" not in nominal
+    lateral = "lateral-compliance" in look and "lateral-compliance" not in nominal
+    if compensators and not laws:
         why = "fitted by --params" if "spring-laws" in nominal else "not among the --candidates"
         raise ValueError(f"--compensator-at: spring laws are {why}")
     try:
-        cand_robot = candidate_robot(robot, compensators) if with_laws else robot
+        cand_robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral)
     except ValueError as e:
         raise ValueError(f"--compensator-at: {str(e).partition(': ')[2]}") from None
     if not tree_candidates(cand_robot, nominal, look):

@@ -249,7 +249,8 @@ _OWN_SIZE = ("joint-compliance", "lateral-compliance", "spring-laws")
 def pivot_units(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
     """Host-side: `(P,)` each parameter's typical size at `robot`'s values, in units of
     its `Parameter.scale`: a compliance's or a spring law's own magnitude where it is not
-    0, else its `scale` (1). The pivoting that picks the fitted set compares columns in
+    0; a spring at 0 (a candidate) the median of the robot's nonzero angular springs;
+    else its `scale` (1). The pivoting that picks the fitted set compares columns in
     these units: a joint 45 times stiffer than the constant typical size (the FANUC's
     against Agile Justin's) would otherwise dwarf a spring law that the data determine
     well. `scale` itself stays a constant of the group, so that the programs compiled
@@ -257,7 +258,15 @@ def pivot_units(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
     p0 = np.abs(np.asarray(get_vector(robot, table), float))
     scale = np.array([p.scale for p in table])
     own = np.array([p.group in _OWN_SIZE for p in table], bool)
-    return np.where(own & (p0 > 0), p0 / scale, 1.0)
+    units = np.where(own & (p0 > 0), p0 / scale, 1.0)
+    comp = np.abs(np.asarray(robot.compliance, float))
+    angular = np.array(robot.springs, bool).reshape(-1, 3)
+    angular[:, 0] &= ~np.asarray(robot.sliding, bool)
+    springs = comp[angular & (comp > 0)]
+    if springs.size:
+        zero = np.array([p.field == "compliance" and p.unit != "µm/N" for p in table], bool)
+        units = np.where(zero & (p0 == 0), np.median(springs) / scale, units)
+    return units
 
 
 #: The full calibration from deflection data: the springs. A deflection is the response

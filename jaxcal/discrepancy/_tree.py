@@ -11,7 +11,7 @@ family at a time.
    measurement frame, one marker's offset, one spring law's constants, and where spring
    laws are candidates a joint-stiffness nonlinearity and backlash of every joint and a
    gravity compensator on the joints asked for (`candidate_robot` puts absent laws
-   there). They apply to any robot file: a family
+   there, and lateral springs on joints that lack them). They apply to any robot file: a family
    is a set of entries of the robot's parameter table (`_tree_candidates.py`).
 3. **Greedy forward selection** on the model linearised at the current fit: the
    candidate whose columns, orthogonalised against the fitted ones, take the largest
@@ -61,6 +61,7 @@ from ._report import DECISIVE_BIC
 from ._tree_candidates import (
     candidate_groups,
     candidate_robot,
+    fitted_nominal,
     positive_parameters,
     tree_candidates,
 )
@@ -257,11 +258,13 @@ def discover_tree(
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     if candidates is None:
         look = candidate_groups(robot, data.deflection) if groups is None else groups
-        if "spring-laws" in look and "spring-laws" not in nominal:
-            robot = candidate_robot(robot, compensators)
-        elif compensators:
+        nominal = fitted_nominal(robot, nominal, look)
+        laws = "spring-laws" in look and "spring-laws" not in nominal
+        lateral = "lateral-compliance" in look and "lateral-compliance" not in nominal
+        if compensators and not laws:
             why = "in nominal" if "spring-laws" in nominal else "not among the candidate groups"
             raise ValueError(f"compensators: spring laws are {why}")
+        robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral)
         cands = tree_candidates(robot, nominal, look)
     else:
         if compensators:

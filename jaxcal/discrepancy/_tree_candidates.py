@@ -1,7 +1,8 @@
 """The candidate families of `discover_tree`: the parameter families a calibration
 does not fit, one per place, for any robot given as a kinematic tree, and the robot
 with a joint-stiffness nonlinearity and backlash on every joint (and a compensator on
-the joints asked for) for the spring-law candidates.
+the joints asked for) for the spring-law candidates, and lateral springs on the joints
+whose elements lack them.
 
 A tool compliance (the tool turning on the flange under a wrench at the tool) is no
 candidate here: absolute measurements under the robot's own weight load nothing beyond
@@ -30,6 +31,7 @@ __all__ = [
     "tree_candidates",
     "candidate_groups",
     "candidate_robot",
+    "fitted_nominal",
     "positive_parameters",
     "COMPENSATOR_ARMS",
 ]
@@ -64,15 +66,47 @@ def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.nd
     return out
 
 
-def candidate_robot(robot: TreeRobot, compensators: tuple[str, ...] = ()) -> TreeRobot:
-    """`robot` with the absent laws a discovery tries, as candidates of the
-    `spring-laws` group: a joint-stiffness nonlinearity (`JointHardening`, `h = 0`) and
-    lost motion (`JointBacklash`, `b = 0`) on every revolute joint that has no such law
-    yet (one whose κθ is 0 sees none of them), and a gravity compensator
-    (`CompensatorLaw`, `Kc = 0`) on each joint named in `compensators`: a
-    zero-free-length spring across the lever arms `COMPENSATOR_ARMS`, aligned at the
-    joint's zero, whose torque `Kc·lc·l2·sin φ` balances a link's weight (write the law
-    into the robot file, with `Kc` 0, for another geometry)."""
+def fitted_nominal(
+    robot: TreeRobot, nominal: tuple[str, ...], look: tuple[str, ...]
+) -> tuple[str, ...]:
+    """The groups of `nominal` that fit something in `robot`. One it has no parameter
+    of, among the groups the search looks in, is left to the search, which puts its
+    elements there at zero (`candidate_robot`): deflection data's full calibration
+    names the lateral springs, which the FANUC's file does not give its joints."""
+    return tuple(g for g in nominal if g not in look or parameter_table(robot, (g,)))
+
+
+def candidate_robot(
+    robot: TreeRobot,
+    compensators: tuple[str, ...] = (),
+    *,
+    laws: bool = True,
+    lateral: bool = False,
+) -> TreeRobot:
+    """`robot` with the absent elastic elements a discovery tries, at zero.
+
+    With `laws`, candidates of the `spring-laws` group: a joint-stiffness nonlinearity
+    (`JointHardening`, `h = 0`) and lost motion (`JointBacklash`, `b = 0`) on every
+    revolute joint that has no such law yet (one whose κθ is 0 sees none of them), and
+    a gravity compensator (`CompensatorLaw`, `Kc = 0`) on each joint named in
+    `compensators`: a zero-free-length spring across the lever arms `COMPENSATOR_ARMS`,
+    aligned at the joint's zero, whose torque `Kc·lc·l2·sin φ` balances a link's weight
+    (write the law into the robot file, with `Kc` 0, for another geometry).
+
+    With `lateral`, candidates of the `lateral-compliance` group: the two lateral
+    springs (κα, κβ = 0) of every active joint's element that lacks them (the FANUC's
+    file gives its joints κθ only): a link bending out of the plane of its joint's
+    motion, or twisting, which no joint spring can mimic."""
+    if lateral:
+        springs = list(robot.springs)
+        for e in robot.drive:
+            springs[e] = (springs[e][0], True, True)
+        if tuple(springs) != robot.springs:
+            robot = dataclasses.replace(robot, springs=tuple(springs))
+    if not laws:
+        if compensators:
+            raise ValueError("compensators: spring laws are not among the candidates")
+        return robot
     if isinstance(compensators, str):
         raise ValueError(f"compensators must be a tuple of joint names, got {compensators!r}")
     compensators = tuple(compensators)
