@@ -264,7 +264,8 @@ def pivot_units(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
     angular[:, 0] &= ~np.asarray(robot.sliding, bool)
     springs = comp[angular & (comp > 0)]
     if springs.size:
-        zero = np.array([p.field == "compliance" and p.unit != "µm/N" for p in table], bool)
+        # A slide's axial spring (m/N) is no angular one.
+        zero = np.array([p.field == "compliance" and angular[p.index] for p in table], bool)
         units = np.where(zero & (p0 == 0), np.median(springs) / scale, units)
     return units
 

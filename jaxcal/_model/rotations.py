@@ -98,9 +98,9 @@ def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
     else:
         rpy = np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
     # Near pitch ±90° roll and yaw come from entries of size cos(pitch), each off by
-    # eps/cos(pitch), and the rotation they give with them (a calibrated URDF origin at
-    # 5e-12 from the lock: 6e-11 rad). Gauss–Newton steps on the rotation itself mend
-    # what the angles can express; the split between roll and yaw that the lock leaves
+    # eps/cos(pitch), and so is the rotation they rebuild (a calibrated origin beside a
+    # URDF's right angle). Gauss–Newton steps on the rotation itself mend what the
+    # angles can express; the split between roll and yaw that the lock leaves
     # undetermined (singular values below 1e-10) is left as it is.
     for _ in range(2):
         r, p, y = rpy

@@ -11,8 +11,8 @@ family at a time.
    measurement frame, one marker's offset, one spring law's constants, and where spring
    laws are candidates a joint-stiffness nonlinearity and backlash of every joint and a
    gravity compensator on the joints asked for (`candidate_robot` puts absent laws
-   there, and lateral springs on joints that lack them). They apply to any robot file: a family
-   is a set of entries of the robot's parameter table (`_tree_candidates.py`).
+   there, and lateral springs on joints that lack them). They apply to any robot file:
+   a family is a set of entries of the robot's parameter table (`_tree_candidates.py`).
 3. **Greedy forward selection** on the model linearised at the current fit: the
    candidate whose columns, orthogonalised against the fitted ones, take the largest
    share of the σ-weighted residual is added while it is decisive and predicts better.
