@@ -419,8 +419,8 @@ def test_discover_names_a_stiff_joints_hardening_and_a_bending_where_they_are(
     names both where they are and sizes them within 4 std. The trial fit's set is
     picked with each spring measured in the robot's own sizes: in a constant typical
     size (a light robot's), the lateral candidates' and the joint's compliance columns
-    dwarfed the hardening's, the pivoting held it, and the search named a hardening at
-    joint 5 and a backlash at joint 3 instead."""
+    would dwarf the hardening's, the pivoting would hold it, and the search would name
+    a hardening at joint 5 and a backlash at joint 3 instead."""
     truth = json.loads(tree_file.read_text())
     truth["spring_laws"].append({"law": "joint_hardening", "joint": "q3", "h_J": 0.03})
     (j2,) = [e for e in truth["elements"] if e["name"] == "J2"]

@@ -305,8 +305,8 @@ SLIDE_URDF = """<?xml version="1.0"?>
 def test_rpy_near_the_gimbal_lock_rebuild_the_rotation(roll, yaw, gap, sign):
     """Roll, pitch, yaw of `Rz(yaw) Ry(pitch) Rx(roll)` with the pitch 1e-11 to 0.1 rad
     from ±90° (a calibrated origin beside a URDF's right angle, as the UR5's) rebuild
-    the rotation to round-off: a few ulp of its entries. Roll and yaw alone each come
-    from entries of size cos(pitch) and were off by up to 7e-5 rad in the rotation."""
+    the rotation to round-off: a few ulp of its entries, although roll and yaw alone
+    each come from entries of size cos(pitch), off by eps/cos(pitch)."""
     pitch = sign * (math.pi / 2 - 10.0**gap)
     R = np.asarray(Rz(jnp.asarray(yaw)) @ Ry(jnp.asarray(pitch)) @ Rx(jnp.asarray(roll)))
     r, p, y = rpy_from_matrix(R)
