@@ -102,7 +102,7 @@ def run_tree(args: argparse.Namespace) -> int:
     from ..discrepancy._tree_candidates import (
         candidate_groups,
         candidate_robot,
-        fitted_nominal,
+        search_scope,
         tree_candidates,
     )
 
@@ -116,12 +116,10 @@ def run_tree(args: argparse.Namespace) -> int:
         if args.candidates is None
         else parse_groups(args.candidates, robot)
     )
-    nominal = fitted_nominal(robot, nominal, look)
     compensators = tuple(j.strip() for j in (args.compensator_at or "").split(",") if j.strip())
     if args.compensator_at is not None and not compensators:
         raise ValueError("--compensator-at: names no joint")
-    laws = "spring-laws" in look and "spring-laws" not in nominal
-    lateral = "lateral-compliance" in look and "lateral-compliance" not in nominal
+    nominal, laws, lateral = search_scope(robot, nominal, look)
     if compensators and not laws:
         why = "fitted by --params" if "spring-laws" in nominal else "not among the --candidates"
         raise ValueError(f"--compensator-at: spring laws are {why}")

@@ -61,8 +61,8 @@ from ._report import DECISIVE_BIC
 from ._tree_candidates import (
     candidate_groups,
     candidate_robot,
-    fitted_nominal,
     positive_parameters,
+    search_scope,
     tree_candidates,
 )
 from ._tree_discriminate import discriminate_tree
@@ -258,9 +258,7 @@ def discover_tree(
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     if candidates is None:
         look = candidate_groups(robot, data.deflection) if groups is None else groups
-        nominal = fitted_nominal(robot, nominal, look)
-        laws = "spring-laws" in look and "spring-laws" not in nominal
-        lateral = "lateral-compliance" in look and "lateral-compliance" not in nominal
+        nominal, laws, lateral = search_scope(robot, nominal, look)
         if compensators and not laws:
             why = "in nominal" if "spring-laws" in nominal else "not among the candidate groups"
             raise ValueError(f"compensators: spring laws are {why}")

@@ -31,7 +31,7 @@ __all__ = [
     "tree_candidates",
     "candidate_groups",
     "candidate_robot",
-    "fitted_nominal",
+    "search_scope",
     "positive_parameters",
     "COMPENSATOR_ARMS",
 ]
@@ -66,14 +66,19 @@ def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.nd
     return out
 
 
-def fitted_nominal(
+def search_scope(
     robot: TreeRobot, nominal: tuple[str, ...], look: tuple[str, ...]
-) -> tuple[str, ...]:
-    """The groups of `nominal` that fit something in `robot`. One it has no parameter
-    of, among the groups the search looks in, is left to the search, which puts its
-    elements there at zero (`candidate_robot`): deflection data's full calibration
-    names the lateral springs, which the FANUC's file does not give its joints."""
-    return tuple(g for g in nominal if g not in look or parameter_table(robot, (g,)))
+) -> tuple[tuple[str, ...], bool, bool]:
+    """What a discovery that looks in the groups `look` fits and what it adds: the
+    groups of `nominal` that fit something in `robot`, and whether the search puts the
+    absent spring laws, and the absent lateral springs, there at zero
+    (`candidate_robot`'s `laws` and `lateral`: their group is looked in, not nominal).
+    A group of `nominal` of which the robot has no parameter is left to the search:
+    deflection data's full calibration names the lateral springs, which the FANUC's
+    file does not give its joints."""
+    nominal = tuple(g for g in nominal if g not in look or parameter_table(robot, (g,)))
+    laws, lateral = (g in look and g not in nominal for g in ("spring-laws", "lateral-compliance"))
+    return nominal, laws, lateral
 
 
 def candidate_robot(
