@@ -934,3 +934,23 @@ def test_poses_divided_among_devices_give_the_same_numbers(justin, data, tmp_pat
     table = jaxcal.parameter_table(fanuc, ("joint-compliance", "spring-laws"))
     J = scaled_jacobian(fanuc, table, plan)
     np.testing.assert_allclose(two["Jf"], J, rtol=0, atol=1e-9 * np.abs(J).max())
+
+
+@pytest.mark.parametrize("lateral", [(), ("alpha",)])
+def test_deflections_of_springs_an_element_lacks_are_ignored(lateral):
+    """The FANUC's tree with joint springs only, and with a lateral spring about x at
+    joint 2 alone: lateral deflections given for springs an element does not have move
+    no frame; those of a spring it has do."""
+    d = jaxcal.tree_to_dict(jaxcal.load_tree("fanuc_m900ib700"))
+    for el in d["elements"]:
+        if el["name"] == "J2":
+            el["springs"] = ["theta", *lateral]
+    robot = jaxcal.tree_from_dict(d)
+    q = jnp.asarray([0.1, 0.3, -0.2, 0.4, 0.5, -0.6])
+    mask = jnp.asarray(robot.spring_mask())
+    phi = jnp.full(mask.shape, 1e-3)
+    frames = lambda p: jaxcal.element_frames(robot, q, p)  # noqa: E731
+    own = phi.at[:, 1:].set(jnp.where(mask[:, 1:], phi[:, 1:], 0.0))
+    np.testing.assert_array_equal(frames(phi), frames(own))
+    if lateral:
+        assert not np.allclose(frames(phi), frames(phi.at[:, 1].set(0.0)))
