@@ -67,13 +67,12 @@ def _element_transform(
     d, theta, a, alpha, beta = dh[0] + slide, dh[1], dh[2], dh[3], dh[4]
     Ro = rpy_matrix(origin[3:])
     Rab = _mm(_mm(Ro, Rx(alpha)), Ry(beta))
-    if not lateral:
-        R = _mm(Rab, Rz(theta + turn))
-    elif before:
-        Rab = _mm(Rab, _mm(Rx(phi[1]), Ry(phi[2])))
-        R = _mm(Rab, Rz(theta + turn))
-    else:
-        R = _mm(_mm(Rab, Rz(theta + turn)), _mm(Rx(phi[1]), Ry(phi[2])))
+    tilt = _mm(Rx(phi[1]), Ry(phi[2])) if lateral else None
+    if tilt is not None and before:
+        Rab = _mm(Rab, tilt)
+    R = _mm(Rab, Rz(theta + turn))
+    if tilt is not None and not before:
+        R = _mm(R, tilt)
     # Translation: the origin, then a along the x after Rx(α) (which Rx(α) leaves), then
     # d along the z of Rx(α)·Ry(β)·Rz(...) (which Rz leaves).
     t = origin[:3] + Ro[:, 0] * a + Rab[:, 2] * d
@@ -92,9 +91,9 @@ def element_poses(
     dtype = robot.dh.dtype
     angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q
     springs = jnp.zeros((e, 3), dtype)
+    has = robot.spring_mask()[:, 1:]  # the lateral springs of each moving element
     if phi is not None:
         angles = angles + jnp.asarray(robot.spring_matrix(), dtype) @ phi[:, 0]
-        has = robot.spring_mask()[:, 1:]
         if has.any() and not has.all():  # (with none, `_element_transform` reads none)
             phi = phi.at[:, 1:].set(jnp.where(has, phi[:, 1:], 0.0))
         springs = springs.at[jnp.asarray(robot.revolute, int)].set(phi)
@@ -114,7 +113,7 @@ def element_poses(
         springs,
         slides,
         robot.lateral_before_joint,
-        bool(robot.spring_mask()[:, 1:].any()),
+        bool(has.any()),
         any(robot.sliding),
     )
 
