@@ -202,6 +202,76 @@ def test_hidden_spring_law_is_named_and_sized(hidden):
         assert not found.warnings()
 
 
+def _arm_on_a_column(bracket: list[float] | None):
+    """A turn about the vertical, a column on it (a fixed element), an arm pitching
+    about the horizontal at its top, and a bracket at the arm's end (a fixed element)
+    holding a tool whose mass and marker sit off the arm's axis; `bracket`: the
+    compliances (µrad/(N·m)) of the bracket's three springs, or none."""
+    held = {"name": "bracket", "parent": "arm", "origin_xyz_m": [1.0, 0.0, 0.0]}
+    if bracket is not None:
+        held |= {"springs": ["theta", "alpha", "beta"], "compliance_urad_per_Nm": bracket}
+    return jaxcal.tree_from_dict(
+        {
+            "kind": "tree",
+            "name": "arm on a column",
+            "joints": [
+                {"name": "q1", "limits_deg": [-180, 180]},
+                {"name": "q2", "limits_deg": [-70, 70]},
+            ],
+            "elements": [
+                {"name": "turn", "coupling": {"q1": 1}, "springs": ["theta"]},
+                {"name": "column", "parent": "turn", "origin_xyz_m": [0.0, 0.0, 0.8]},
+                {
+                    "name": "arm",
+                    "parent": "column",
+                    "origin_rpy_deg": [90, 0, 0],
+                    "coupling": {"q2": 1},
+                    "springs": ["theta"],
+                    "compliance_urad_per_Nm": [2.0, 0.0, 0.0],
+                },
+                held,
+            ],
+            "masses": [
+                {"element": "arm", "kg": 30.0, "at_m": [0.5, 0.0, 0.0]},
+                {"element": "bracket", "kg": 20.0, "at_m": [0.2, 0.1, 0.3]},
+            ],
+            "markers": [{"name": "tip", "element": "bracket", "at_m": [0.3, 0.1, 0.3]}],
+        }
+    )
+
+
+#: The hidden springs of the bracket (θ, α, β), µrad/(N·m): the tool's 0.2 mm RMS.
+BRACKET = (15.0, 25.0, 20.0)
+
+
+@pytest.mark.parametrize("hidden", [True, False])
+def test_a_springy_bracket_is_named_where_it_is(hidden):
+    # The robot file gives the bracket no springs; the truth has them (or not). The
+    # candidates of the link-compliance group are the springs of the fixed elements that
+    # carry something: the column (the whole arm) and the bracket (the tool). A bracket
+    # turning under the tool's weight moves the marker about the bracket, the column
+    # bending moves it about the column's top, and the arm's joint spring about its
+    # axis: the search names the bracket alone, and nothing on noise alone.
+    sigma = 1e-5
+    truth = _arm_on_a_column(list(BRACKET) if hidden else None)
+    rng = np.random.default_rng(2)
+    q = np.column_stack([rng.uniform(-np.pi, np.pi, 40), rng.uniform(-1.2, 1.2, 40)])
+    data = _measured(truth, q, sigma)
+    nominal = _arm_on_a_column(None)
+    found = jaxcal.discover_tree(
+        nominal, data, ("frames", "joint-compliance"), groups=("link-compliance",)
+    )
+    assert found.n_candidates == 2
+    assert [e.candidate.label for e in found.effects] == (
+        ["link-compliance[bracket]"] if hidden else []
+    )
+    assert found.rms_after_mm < 1.2 * np.sqrt(3) * sigma * 1e3
+    if hidden:
+        for d, c in zip(found.effects[0].sizes(), BRACKET, strict=True):
+            assert d["unit"] == "µrad/(N·m)" and abs(d["value"] - c) < 4.5 * d["std"], d
+        assert not found.warnings()  # the column does not fit about as well
+
+
 def test_a_compensator_needs_a_revolute_joint():
     # Its law is written for an angle: a prismatic joint is refused by name before any fit.
     d = jaxcal.tree_to_dict(_pendulum(2e-6, None))

@@ -954,3 +954,62 @@ def test_deflections_of_springs_an_element_lacks_are_ignored(lateral):
     np.testing.assert_array_equal(frames(phi), frames(own))
     if lateral:
         assert not np.allclose(frames(phi), frames(phi.at[:, 1].set(0.0)))
+
+
+def _fanuc_with_fixed_springs(driven: bool) -> jaxcal.TreeRobot:
+    """The FANUC's tree with springs on two fixed elements (the wrist, all three; the
+    lower arm's frame, about y), or (`driven`) the same springs on the same elements
+    driven by two extra joints, held at 0 in use, whose drive springs are rigid where the
+    fixed element has no spring about z."""
+    d = jaxcal.tree_to_dict(jaxcal.load_tree("fanuc_m900ib700"))
+    if driven:
+        d["joints"] += [{"name": n, "limits_deg": [-1, 1]} for n in ("flex1", "flex2")]
+    for el in d["elements"]:
+        if el["name"] == "wrist":
+            el |= {"springs": ["theta", "alpha", "beta"], "compliance_urad_per_Nm": [2, 3, 4]}
+            if driven:
+                el["coupling"] = {"flex1": 1.0}
+        if el["name"] == "link2":
+            el |= {"springs": ["beta"], "compliance_urad_per_Nm": [0, 0, 1.5]}
+            if driven:
+                el |= {"coupling": {"flex2": 1.0}, "springs": ["theta", "beta"]}
+    return jaxcal.tree_from_dict(d)
+
+
+def test_springs_of_fixed_elements_act_as_on_elements_held_at_zero():
+    """A fixed element's springs turn what follows it as the same springs of an element
+    driven by a joint held at 0 (with a rigid drive spring where the fixed element has
+    none about z): the same marker positions and the same derivatives in every
+    compliance, at random poses and loads. The robot file keeps them, and a
+    calibration finds them in the `link-compliance` group, fitted by default."""
+    fixed, driven = _fanuc_with_fixed_springs(False), _fanuc_with_fixed_springs(True)
+    assert [fixed.names[e] for e in fixed.elastic if e not in fixed.revolute] == [
+        "link2",
+        "wrist",
+    ]
+    rng = np.random.default_rng(0)
+    q = jnp.asarray(rng.uniform(-0.5, 0.5, (4, 6)))
+    f = jnp.asarray(rng.normal(size=(4, 3)) * 3000.0)
+    q8 = jnp.concatenate([q, jnp.zeros((4, 2))], axis=1)
+
+    def markers(robot, c, q, f):
+        robot = eqx.tree_at(lambda r: r.compliance, robot, c)
+        return jax.vmap(lambda q, f: jaxcal.predict_markers(robot, q, f)[0])(q, f)
+
+    y1, J1 = jax.jvp(lambda c: markers(fixed, c, q, f), (fixed.compliance,), (fixed.compliance,))
+    y2, J2 = jax.jvp(
+        lambda c: markers(driven, c, q8, f), (driven.compliance,), (driven.compliance,)
+    )
+    loose = markers(jaxcal.load_tree("fanuc_m900ib700"), fixed.compliance, q, f)
+    assert np.abs(y1 - loose).max() > 1e-3  # the springs move the tool by mm
+    np.testing.assert_allclose(y1, y2, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(J1, J2, rtol=0, atol=1e-12 * np.abs(J1).max())
+    # The robot file keeps them.
+    again = jaxcal.tree_from_dict(jaxcal.tree_to_dict(fixed))
+    assert again.springs == fixed.springs
+    np.testing.assert_allclose(again.compliance, fixed.compliance, rtol=1e-15, atol=0)
+    # A calibration names them, in the group that the full calibration fits.
+    names = [p.name for p in jaxcal.parameter_table(fixed, ("link-compliance",))]
+    assert names == ["link2.k_beta", "wrist.k_theta", "wrist.k_alpha", "wrist.k_beta"]
+    assert jaxcal.default_groups(fixed)[-1] == "link-compliance"
+    assert "link-compliance" not in jaxcal.default_groups(jaxcal.load_tree("fanuc_m900ib700"))

@@ -1,9 +1,9 @@
 """Robots written as URDF and read back, and a URDF robot calibrated.
 
 - Round trip: the FANUC preset, Agile Justin (lateral springs before the joints) and a
-  gantry with prismatic joints, given springs everywhere they have them, written as a
-  URDF and sidecar and read again, predict the same marker positions and the same
-  deflections under a wrench to 1e-9 mm.
+  gantry with prismatic joints, given springs everywhere they have them and on every
+  fixed element, written as a URDF and sidecar and read again, predict the same marker
+  positions and the same deflections under a wrench to 1e-9 mm.
 - The written URDF is a URDF: Pinocchio reads it and places every link where jaxcal
   does.
 - A UR5 read from its URDF, with geometric errors of a few mm and mrad at its joint
@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib.metadata
 from pathlib import Path
@@ -102,8 +103,13 @@ GANTRY = {
 }
 
 
-def _springy(robot: jaxcal.TreeRobot, seed: int = 0) -> jaxcal.TreeRobot:
-    """`robot` with a compliance on every spring it has (0.5..3 µrad/(N·m), µm/N)."""
+def _springy(robot: jaxcal.TreeRobot, seed: int = 0, fixed: bool = False) -> jaxcal.TreeRobot:
+    """`robot` with a compliance on every spring it has (0.5..3 µrad/(N·m), µm/N), and
+    with `fixed` three springs on every fixed element too."""
+    if fixed:
+        pairs = zip(robot.coupling, robot.springs, strict=True)
+        springs = tuple(s if c else (True,) * 3 for c, s in pairs)
+        robot = dataclasses.replace(robot, springs=springs)
     has = np.array(robot.springs, float)
     c = has * np.random.default_rng(seed).uniform(0.5, 3.0, has.shape) * 1e-6
     return eqx.tree_at(lambda r: r.compliance, robot, jnp.asarray(c))
@@ -137,7 +143,7 @@ def _predictions():
 @pytest.mark.parametrize("name", ["fanuc_m900ib700", "dlr_agile_justin", "gantry"])
 def test_round_trip_through_urdf_predicts_the_same(name, tmp_path):
     base = jaxcal.tree_from_dict(GANTRY) if name == "gantry" else jaxcal.load_tree(name)
-    robot = _springy(base)
+    robot = _springy(base, fixed=True)
     urdf, sidecar = jaxcal.save_urdf(robot, tmp_path / "robot.urdf")
     assert sidecar == tmp_path / "robot.json"
     back = jaxcal.load_tree(sidecar)
@@ -145,6 +151,8 @@ def test_round_trip_through_urdf_predicts_the_same(name, tmp_path):
     assert back.marker_names == robot.marker_names
     assert back.lateral_before_joint == robot.lateral_before_joint
     assert back.joint_prismatic == robot.joint_prismatic
+    names = lambda r: sorted(p.name for p in jaxcal.parameter_table(r, ("link-compliance",)))  # noqa: E731
+    assert names(back) == names(robot) and (names(robot) or name == "gantry")
     np.testing.assert_allclose(back.joint_limits, robot.joint_limits, rtol=0, atol=1e-12)
 
     q = jnp.asarray(_poses(robot, 6, 1))

@@ -119,12 +119,12 @@ def run_tree(args: argparse.Namespace) -> int:
     compensators = tuple(j.strip() for j in (args.compensator_at or "").split(",") if j.strip())
     if args.compensator_at is not None and not compensators:
         raise ValueError("--compensator-at: names no joint")
-    nominal, laws, lateral = search_scope(robot, nominal, look)
+    nominal, laws, lateral, link = search_scope(robot, nominal, look)
     if compensators and not laws:
         why = "fitted by --params" if "spring-laws" in nominal else "not among the --candidates"
         raise ValueError(f"--compensator-at: spring laws are {why}")
     try:
-        cand_robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral)
+        cand_robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral, link=link)
     except ValueError as e:
         raise ValueError(f"--compensator-at: {str(e).partition(': ')[2]}") from None
     if not tree_candidates(cand_robot, nominal, look):

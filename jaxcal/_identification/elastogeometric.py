@@ -84,7 +84,13 @@ JACOBIAN_RTOL = 1e-4
 #: Groups whose parameters are physical magnitudes (a spring, a mass, a law's
 #: constant): their relative standard deviation says whether the data determine them.
 #: Frame and geometric parameters are errors about zero, decided by the pivoting alone.
-MAGNITUDE_GROUPS = ("joint-compliance", "lateral-compliance", "masses", "spring-laws")
+MAGNITUDE_GROUPS = (
+    "joint-compliance",
+    "lateral-compliance",
+    "link-compliance",
+    "masses",
+    "spring-laws",
+)
 
 
 def pose_markers(

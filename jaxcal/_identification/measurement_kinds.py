@@ -35,7 +35,7 @@ from .pivoting import pivoted_subset
 
 __all__ = ["KindComparison", "compare_measurement_kinds"]
 
-_INTEREST = ("joint-compliance", "lateral-compliance", "spring-laws")
+_INTEREST = ("joint-compliance", "lateral-compliance", "link-compliance", "spring-laws")
 _NUISANCE = ("frames", "joint-offsets", "dh")
 
 

@@ -14,6 +14,8 @@ Groups, in the order a calibration adds them:
   yaw): a URDF joint's origin, for robots whose file says `geometric_errors: origins`;
 - `joint-compliance`: the spring about (along, if prismatic) each joint axis, κθ;
 - `lateral-compliance`: the two springs about the perpendicular axes, κα, κβ;
+- `link-compliance`: the springs of fixed elements (a link bending at a point of its
+  own, a tool turning on its flange), κθ, κα, κβ about the element's z, x, y;
 - `masses`: each point mass (kg);
 - `spring-laws`: the parameters of each spring law (e.g. a compensator's Kc, s0);
 
@@ -56,6 +58,7 @@ GROUPS: tuple[str, ...] = (
     "origins",
     "joint-compliance",
     "lateral-compliance",
+    "link-compliance",
     "masses",
     "spring-laws",
 )
@@ -176,6 +179,23 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                             typical,
                         )
                     )
+        elif g == "link-compliance":
+            for e in robot.elastic:
+                if e in moving:
+                    continue
+                for i, a in enumerate(("theta", "alpha", "beta")):
+                    if robot.springs[e][i]:
+                        out.append(
+                            Parameter(
+                                f"{robot.names[e]}.k_{a}",
+                                g,
+                                "compliance",
+                                (e, i),
+                                "µrad/(N·m)",
+                                1e6,
+                                _COMP,
+                            )
+                        )
         else:
             for e in moving:
                 for i, a in ((1, "alpha"), (2, "beta")):
@@ -243,7 +263,7 @@ def set_vector(robot: TreeRobot, table: tuple[Parameter, ...], p: Float[Array, "
 
 
 #: Groups whose parameters are magnitudes sized by the robot's own values.
-_OWN_SIZE = ("joint-compliance", "lateral-compliance", "spring-laws")
+_OWN_SIZE = ("joint-compliance", "lateral-compliance", "link-compliance", "spring-laws")
 
 
 def pivot_units(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.ndarray:
@@ -282,12 +302,16 @@ def default_groups(robot: TreeRobot | None = None, deflection: bool = False) -> 
     """The full calibration of `robot`: `DEFAULT_GROUPS`, with the joint origins'
     errors in place of the DH rows' for a robot whose file says
     `geometric_errors: origins` (a URDF robot); `DEFLECTION_GROUPS` for deflection
-    data."""
+    data; and `link-compliance` where the robot file gives fixed elements springs."""
     if deflection:
-        return DEFLECTION_GROUPS
-    if robot is not None and robot.geometric_errors == "origins":
-        return tuple("origins" if g == "dh" else g for g in DEFAULT_GROUPS)
-    return DEFAULT_GROUPS
+        groups = DEFLECTION_GROUPS
+    elif robot is not None and robot.geometric_errors == "origins":
+        groups = tuple("origins" if g == "dh" else g for g in DEFAULT_GROUPS)
+    else:
+        groups = DEFAULT_GROUPS
+    if robot is not None and len(robot.elastic) > len(robot.revolute):  # fixed ones too
+        groups = (*groups, "link-compliance")
+    return groups
 
 
 def parse_groups(

@@ -32,8 +32,11 @@ or, with `"lateral_springs": "before-joint"`, tilting the joint axis itself (fix
 the link before the joint): `... · Ry(β) · Rx(φx) · Ry(φy) · Rz(θ + ...) · Trans_z(d)`.
 
 Which of its three springs an element has is part of the topology (`springs`): all
-three by default. Spring laws (`spring_laws.py`, e.g. a gravity compensator) act on a
-joint's link-side angle.
+three by default. A fixed element may carry springs too (none by default), turning
+everything after it about its own axes, `... · Rz(θ + φz) · Rx(φx) · Ry(φy)`: a link
+that bends at a point of its own (VJM's link springs), a tool that turns on its flange.
+Spring laws (`spring_laws.py`, e.g. a gravity compensator) act on a joint's link-side
+angle.
 
 Everything inside is SI (m, rad, kg, rad/(N·m)); the robot file carries its units in
 its key names. Array fields are what one identifies; topology is plain Python.
@@ -65,7 +68,8 @@ class TreeRobot(eqx.Module):
     - `origin`: `(e, 6)` fixed translation (m) and roll, pitch, yaw (rad) of each element.
     - `dh`: `(e, 5)` modified DH row `(d, θ, a, α, β)` (m, rad, m, rad, rad).
     - `compliance`: `(e, 3)` spring compliances about z (the joint), x and y (lateral),
-      rad/(N·m) (along z, m/N, for a prismatic element); zero rows for fixed elements.
+      rad/(N·m) (along z, m/N, for a prismatic element); zero where an element has no
+      such spring (a fixed element, unless `springs` gives it some).
     - `mass_kg`, `mass_at`: `(m,)` point masses and their centres of gravity in the frame
       of their element (m).
     - `marker_at`: `(k, 3)` marker positions in the frame of their element (m).
@@ -167,9 +171,6 @@ class TreeRobot(eqx.Module):
                 )
             if not self.springs[el][0]:
                 raise ValueError(f"joint {self.joint_names[j]!r}: its drive element has no spring")
-        for i, has in enumerate(self.springs):
-            if any(has) and not self.coupling[i]:
-                raise ValueError(f"element {self.names[i]!r}: a fixed element has no spring")
         for law in self.laws:
             if not 0 <= law.joint < n:
                 raise ValueError(f"spring law on joint {law.joint} of {n}")
@@ -204,6 +205,13 @@ class TreeRobot(eqx.Module):
         return tuple(i for i, c in enumerate(self.coupling) if c)
 
     @property
+    def elastic(self) -> tuple[int, ...]:
+        """Indices of the elements that have a row of spring deflections φ: those that
+        move, and fixed ones with springs (the rows of every `phi` and of
+        `spring_mask`)."""
+        return tuple(i for i, c in enumerate(self.coupling) if c or any(self.springs[i]))
+
+    @property
     def sliding(self) -> tuple[bool, ...]:
         """For each element, whether it is prismatic."""
         return self.prismatic or (False,) * len(self.names)
@@ -227,19 +235,19 @@ class TreeRobot(eqx.Module):
         return C
 
     def spring_matrix(self) -> np.ndarray:
-        """`(e, r)`: the share of the joint-spring deflections (`φz` of the moving
-        elements, in `revolute` order) in each element's angle: an element follows the
+        """`(e, r)`: the share of the z-spring deflections (`φz` of the `elastic`
+        elements, in that order) in each element's angle: an element follows the
         springs of the joints it is coupled to, and its own spring unless it drives a
         joint (then its spring is that joint's θ, already counted)."""
-        col = {el: r for r, el in enumerate(self.revolute)}
-        B = np.zeros((len(self.names), len(self.revolute)))
+        col = {el: r for r, el in enumerate(self.elastic)}
+        B = np.zeros((len(self.names), len(col)))
         for i, c in enumerate(self.coupling):
             for j, k in c:
                 B[i, col[self.drive[j]]] += k
-            if c and i not in self.drive:
+            if i in col and i not in self.drive:
                 B[i, col[i]] += 1.0
         return B
 
     def spring_mask(self) -> np.ndarray:
-        """`(r, 3)` booleans: which springs `(z, x, y)` each moving element has."""
-        return np.array([self.springs[i] for i in self.revolute], bool).reshape(-1, 3)
+        """`(r, 3)` booleans: which springs `(z, x, y)` each `elastic` element has."""
+        return np.array([self.springs[i] for i in self.elastic], bool).reshape(-1, 3)

@@ -162,13 +162,10 @@ def tree_from_dict(d: dict) -> TreeRobot:
                 f"robot file: {where}: a prismatic element's axial spring is "
                 "axial_compliance_um_per_N (compliance_urad_per_Nm[0] must be 0)"
             )
-        if not couplings[-1] and np.any(c != 0):
-            raise ValueError(f"robot file: {where}: a fixed element has no spring")
+        # A fixed element has springs only where its `springs` names them.
         has = el.get("springs", list(SPRINGS) if couplings[-1] else [])
         if not isinstance(has, list) or any(a not in SPRINGS for a in has):
             raise ValueError(f"robot file: {where}.springs must list some of {list(SPRINGS)}")
-        if has and not couplings[-1]:
-            raise ValueError(f"robot file: {where}: a fixed element has no spring")
         springs.append(tuple(a in has for a in SPRINGS))
         if np.any(c[~np.array(springs[-1])] != 0):
             raise ValueError(f"robot file: {where}: a compliance is given for a missing spring")
@@ -334,6 +331,9 @@ def tree_to_dict(robot: TreeRobot) -> dict:
                 el["commanded_coupling"] = {robot.joint_names[j]: k for j, k in robot.commanded[i]}
             if not all(robot.springs[i]):
                 el["springs"] = [a for a, h in zip(SPRINGS, robot.springs[i], strict=True) if h]
+        elif any(robot.springs[i]):  # a fixed element's springs (none by default)
+            el["compliance_urad_per_Nm"] = _r(c[i] * 1e6)
+            el["springs"] = [a for a, h in zip(SPRINGS, robot.springs[i], strict=True) if h]
         elements.append(el)
     w = np.asarray(robot.world)
     return {

@@ -2,10 +2,10 @@
 joint values and spring deflections, marker positions in the measurement frame, and the
 gravity potential of the point masses.
 
-Each moving element is a fixed origin transform (URDF's `origin`, or DH rows with an
-optional Hayati β) followed by its motion about (along) its z axis and its lateral
-springs; the frames are composed along the tree by one scan, so that the traced program
-does not grow with the number of elements.
+Each element is a fixed origin transform (URDF's `origin`, or DH rows with an optional
+Hayati β) followed by its motion about (along) its z axis, if it moves, and its springs'
+deflections, if it has springs; the frames are composed along the tree by one scan, so
+that the traced program does not grow with the number of elements.
 
 All functions handle one configuration; batch with `jax.vmap`.
 """
@@ -84,19 +84,19 @@ def element_poses(
 ) -> tuple[Float[Array, "e 3 3"], Float[Array, "e 3"]]:
     """Rotation and position of every element's frame in the robot's base frame, for
     commanded joint values `q` (rad; m for a prismatic joint) and spring deflections
-    `phi` (one row `(φz, φx, φy)` per moving element in `robot.revolute` order, rad; φz
-    in m for a prismatic element; default zero). The lateral deflections of springs an
+    `phi` (one row `(φz, φx, φy)` per element with springs, in `robot.elastic` order,
+    rad; φz in m for a prismatic element; default zero). The lateral deflections of springs an
     element does not have (`robot.springs`) are ignored."""
     e = len(robot.names)
     dtype = robot.dh.dtype
     angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q
     springs = jnp.zeros((e, 3), dtype)
-    has = robot.spring_mask()[:, 1:]  # the lateral springs of each moving element
+    has = robot.spring_mask()[:, 1:]  # the lateral springs of each elastic element
     if phi is not None:
         angles = angles + jnp.asarray(robot.spring_matrix(), dtype) @ phi[:, 0]
         if has.any() and not has.all():  # (with none, `_element_transform` reads none)
             phi = phi.at[:, 1:].set(jnp.where(has, phi[:, 1:], 0.0))
-        springs = springs.at[jnp.asarray(robot.revolute, int)].set(phi)
+        springs = springs.at[jnp.asarray(robot.elastic, int)].set(phi)
     # One scan over the elements in topological order (not a Python loop: the program,
     # and so its trace and compile time, does not grow with the number of elements).
     # Slot e of the carried buffers holds the base frame, the parent of root elements.
@@ -173,7 +173,7 @@ def link_angles(
 ) -> Float[Array, " n"]:
     """Link-side angles `q + θ` (rad) of the active joints, θ the deflection of each
     joint's drive spring."""
-    rows = [robot.revolute.index(el) for el in robot.drive]
+    rows = [robot.elastic.index(el) for el in robot.drive]
     return q + phi[jnp.asarray(rows, int), 0]
 
 

@@ -3,7 +3,7 @@ the spring laws and an optional wrench, its implicit derivative, and what measur
 see of it (deflections, marker positions); the kinematics are `tree_kinematics.py`'s.
 
 The equilibrium minimises the total potential `U(φ) = V(q, φ) + ½ Σ φ²/κ` over the
-spring deflections φ (three per moving element: about z, x, y), with `V` the gravity of
+spring deflections φ (three per element with springs: about z, x, y), with `V` the gravity of
 the masses, the spring laws and the work of an external force. Its stationarity
 condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
 zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
@@ -77,7 +77,7 @@ def law_batches(robot: TreeRobot) -> list[tuple[SpringLaw, Array, Array]]:
     `potential` and `extra` are elementwise, so one call serves the batch: the traced
     program does not grow with the number of joints that carry a law (a discovery puts
     two on every joint)."""
-    row = {e: i for i, e in enumerate(robot.revolute)}
+    row = {e: i for i, e in enumerate(robot.elastic)}
     out = []
     for cls in dict.fromkeys(type(law) for law in robot.laws):
         laws = [law for law in robot.laws if type(law) is cls]
@@ -153,9 +153,9 @@ DENSE_SPRINGS = 12
 
 
 def spring_compliance(robot: TreeRobot) -> Float[Array, "r 3"]:
-    """Each moving element's spring compliances `(z, x, y)` (rad/(N·m), or m/N along a
-    slide), zero where the element has no such spring."""
-    compliance = robot.compliance[jnp.asarray(robot.revolute, int)]
+    """Each `elastic` element's spring compliances `(z, x, y)` (rad/(N·m), or m/N along
+    a slide), zero where the element has no such spring."""
+    compliance = robot.compliance[jnp.asarray(robot.elastic, int)]
     return jnp.where(jnp.asarray(robot.spring_mask()), compliance, 0.0)
 
 
@@ -259,7 +259,7 @@ def _solver(robot: TreeRobot, tol: float):
 def _fixed_point(robot, q, force, moment, *, at: int, max_steps: int, derivative_rtol: float):
     args = (robot, q, force, moment, at)
     tol = _tolerance(q.dtype)
-    phi0 = jnp.zeros((len(robot.revolute), 3), q.dtype)
+    phi0 = jnp.zeros((len(robot.elastic), 3), q.dtype)
     # The rigid robot's deflections are the torques times the compliances: one
     # fixed-point step gives a start within the springs' second-order effect.
     phi0 = phi0 - spring_residual(phi0, args)

@@ -76,6 +76,7 @@ from .._keys import check_keys
 from .tree import G, TreeRobot
 from .tree_files import tree_from_dict
 from .urdf_joints import (
+    FIXED_JOINT_KEYS,
     SPRING_KEYS,
     joint_motions,
     slide_limits,
@@ -229,8 +230,10 @@ def tree_dict_from_urdf(path_or_text: str | Path | bytes, sidecar: dict | None =
     for j in order:
         m = motion[j.name]
         origin = _origin(*origins[j.name])
-        if m[0] == "fixed":
-            elements.append({"name": j.child, "parent": j.parent, **origin})
+        if m[0] == "fixed":  # its link a fixed element, with the springs the sidecar gives
+            entry = side_joints.get(j.name, {})
+            springs = {k: entry[k] for k in FIXED_JOINT_KEYS if k in entry}
+            elements.append({"name": j.child, "parent": j.parent, **origin, **springs})
             continue
         alpha, beta = axis_angles(unit_axis(j, where))
         along_z = alpha == 0.0 and beta == 0.0

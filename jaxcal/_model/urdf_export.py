@@ -113,14 +113,36 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
         parent = root if robot.parents[i] < 0 else body[robot.parents[i]]
         A, B = _fixed_parts(o[i], dh[i])
         coupling = robot.coupling[i]
-        if not coupling:
+        split = robot.lateral_before_joint and not np.allclose(B, np.eye(4), rtol=0, atol=0)
+        if not coupling and not any(robot.springs[i]):
             joints[i] = [
                 f'<joint name={quoteattr(_unique(f"{el}_fixed", joint_names))} type="fixed">'
                 f"<parent link={quoteattr(parent)}/><child link={quoteattr(el)}/>"
                 f"{_origin(A @ B)}</joint>"
             ]
             continue
-        split = robot.lateral_before_joint and not np.allclose(B, np.eye(4), rtol=0, atol=0)
+        if not coupling:  # a fixed element with springs: a fixed joint with an entry
+            fixed = _unique(f"{el}_fixed", joint_names)
+            joints[i] = [
+                f'<joint name={quoteattr(fixed)} type="fixed">'
+                f"<parent link={quoteattr(parent)}/><child link={quoteattr(el)}/>"
+                f"{_origin(A if split else A @ B)}</joint>"
+            ]
+            has = zip(("theta", "alpha", "beta"), robot.springs[i], strict=True)
+            side_joints[fixed] = {
+                "springs": [s for s, h in has if h],
+                "compliance_urad_per_Nm": [float(c) * 1e6 for c in comp[i]],
+            }
+        if not coupling and split:  # springs before the DH row's θ, d (as a joint's)
+            body[i] = _unique(f"{el}__dh", links)
+            extra_links.append(body[i])
+            joints[i].append(
+                f'<joint name={quoteattr(_unique(f"{el}__dh", joint_names))} type="fixed">'
+                f"<parent link={quoteattr(el)}/><child link={quoteattr(body[i])}/>"
+                f"{_origin(B)}</joint>"
+            )
+        if not coupling:
+            continue
         jname, slides = joint_of[i], robot.sliding[i]
         T = A if split else A @ B
         if i in robot.drive:

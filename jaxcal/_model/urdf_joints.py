@@ -15,6 +15,7 @@ from .._keys import check_keys
 __all__ = [
     "MOVING",
     "SPRING_KEYS",
+    "FIXED_JOINT_KEYS",
     "SIDECAR_JOINT_KEYS",
     "tree_order",
     "joint_motions",
@@ -25,6 +26,9 @@ __all__ = [
 MOVING = ("revolute", "continuous", "prismatic")
 SPRING_KEYS = ("compliance_urad_per_Nm", "axial_compliance_um_per_N", "springs")
 #: The keys of a sidecar's joint entry.
+#: What a fixed joint's sidecar entry gives: the springs of its child link, a fixed
+#: element of the tree (none unless named).
+FIXED_JOINT_KEYS = ("compliance_urad_per_Nm", "springs")
 SIDECAR_JOINT_KEYS = (
     "coupling",
     "commanded_coupling",
@@ -89,8 +93,12 @@ def joint_motions(urdf_joints: list, side_joints: dict, where: str) -> dict[str,
             raise ValueError(f"URDF sidecar: joints.{name}.locked_m: {name!r} is {kind}")
         if "locked_deg" in entry and kind not in ("revolute", "continuous"):
             raise ValueError(f"URDF sidecar: joints.{name}.locked_deg: {name!r} is {kind}")
-        if kind == "fixed":
-            raise ValueError(f"URDF sidecar: joints.{name}: {name!r} is a fixed joint")
+        other = [k for k in entry if k not in FIXED_JOINT_KEYS]
+        if kind == "fixed" and other:
+            raise ValueError(
+                f"URDF sidecar: joints.{name}: {name!r} is a fixed joint; its entry gives only "
+                f"the springs of its link ({', '.join(FIXED_JOINT_KEYS)}), got {other}"
+            )
 
     # -- each joint's motion: active, mimic (of an active joint), locked or fixed -------
     def locked_at(j) -> float | None:
@@ -156,8 +164,8 @@ def joint_motions(urdf_joints: list, side_joints: dict, where: str) -> dict[str,
     if not active:
         raise ValueError(f"URDF {where}: no movable joint (every joint is fixed or locked)")
     for name, entry in side_joints.items():
-        moving = motion[name][0] in ("active", "mimic")
-        if not moving and any(k in entry for k in (*SPRING_KEYS, "coupling")):
+        locked = motion[name][0] == "locked"  # (a fixed joint's entry is checked above)
+        if locked and any(k in entry for k in (*SPRING_KEYS, "coupling")):
             raise ValueError(f"URDF sidecar: joints.{name}: a locked joint has no spring")
         sliding = joint_of[name].type == "prismatic"
         for key, ok in (("limits_deg", not sliding), ("limits_m", sliding)):

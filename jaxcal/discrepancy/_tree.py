@@ -7,11 +7,13 @@ family at a time.
    holds every candidate, so that every fit here shares one compiled program.
 2. **Candidates** (`tree_candidates`): each parameter family the nominal model does not
    fit, per place: the two lateral springs of one joint (link bending at its root), the
-   joint spring of one joint, the geometric errors of one joint, one point mass, the
-   measurement frame, one marker's offset, one spring law's constants, and where spring
-   laws are candidates a joint-stiffness nonlinearity and backlash of every joint and a
-   gravity compensator on the joints asked for (`candidate_robot` puts absent laws
-   there, and lateral springs on joints that lack them). They apply to any robot file:
+   springs of one fixed element (a link bending at a point of its own, a tool turning
+   on its flange), the joint spring of one joint, the geometric errors of one joint,
+   one point mass, the measurement frame, one marker's offset, one spring law's
+   constants, and where spring laws are candidates a joint-stiffness nonlinearity and
+   backlash of every joint and a gravity compensator on the joints asked for
+   (`candidate_robot` puts absent laws there, lateral springs on joints that lack them
+   and springs on the fixed elements that carry something). They apply to any robot file:
    a family is a set of entries of the robot's parameter table (`_tree_candidates.py`).
 3. **Greedy forward selection** on the model linearised at the current fit: the
    candidate whose columns, orthogonalised against the fitted ones, take the largest
@@ -258,11 +260,11 @@ def discover_tree(
         raise ValueError(f"nominal: unknown group(s) {unknown}; known: {', '.join(GROUPS)}")
     if candidates is None:
         look = candidate_groups(robot, data.deflection) if groups is None else groups
-        nominal, laws, lateral = search_scope(robot, nominal, look)
+        nominal, laws, lateral, link = search_scope(robot, nominal, look)
         if compensators and not laws:
             why = "in nominal" if "spring-laws" in nominal else "not among the candidate groups"
             raise ValueError(f"compensators: spring laws are {why}")
-        robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral)
+        robot = candidate_robot(robot, compensators, laws=laws, lateral=lateral, link=link)
         cands = tree_candidates(robot, nominal, look)
     else:
         if compensators:

@@ -1,8 +1,8 @@
 """The candidate families of `discover_tree`: the parameter families a calibration
 does not fit, one per place, for any robot given as a kinematic tree, and the robot
 with a joint-stiffness nonlinearity and backlash on every joint (and a compensator on
-the joints asked for) for the spring-law candidates, and lateral springs on the joints
-whose elements lack them.
+the joints asked for) for the spring-law candidates, lateral springs on the joints
+whose elements lack them, and springs on the fixed elements that carry something.
 
 A tool compliance (the tool turning on the flange under a wrench at the tool) is no
 candidate here: absolute measurements under the robot's own weight load nothing beyond
@@ -68,17 +68,18 @@ def positive_parameters(robot: TreeRobot, table: tuple[Parameter, ...]) -> np.nd
 
 def search_scope(
     robot: TreeRobot, nominal: tuple[str, ...], look: tuple[str, ...]
-) -> tuple[tuple[str, ...], bool, bool]:
+) -> tuple[tuple[str, ...], bool, bool, bool]:
     """What a discovery that looks in the groups `look` fits and what it adds: the
     groups of `nominal` that fit something in `robot`, and whether the search puts the
-    absent spring laws, and the absent lateral springs, there at zero
-    (`candidate_robot`'s `laws` and `lateral`: their group is looked in, not nominal).
-    A group of `nominal` of which the robot has no parameter is left to the search:
-    deflection data's full calibration names the lateral springs, which the FANUC's
-    file does not give its joints."""
+    absent spring laws, lateral springs and springs of fixed elements there at zero
+    (`candidate_robot`'s `laws`, `lateral` and `link`: their group is looked in, not
+    nominal). A group of `nominal` of which the robot has no parameter is left to the
+    search: deflection data's full calibration names the lateral springs, which the
+    FANUC's file does not give its joints."""
     nominal = tuple(g for g in nominal if g not in look or parameter_table(robot, (g,)))
-    laws, lateral = (g in look and g not in nominal for g in ("spring-laws", "lateral-compliance"))
-    return nominal, laws, lateral
+    groups = ("spring-laws", "lateral-compliance", "link-compliance")
+    laws, lateral, link = (g in look and g not in nominal for g in groups)
+    return nominal, laws, lateral, link
 
 
 def candidate_robot(
@@ -87,6 +88,7 @@ def candidate_robot(
     *,
     laws: bool = True,
     lateral: bool = False,
+    link: bool = False,
 ) -> TreeRobot:
     """`robot` with the absent elastic elements a discovery tries, at zero.
 
@@ -101,13 +103,26 @@ def candidate_robot(
     With `lateral`, candidates of the `lateral-compliance` group: the two lateral
     springs (κα, κβ = 0) of every active joint's element that lacks them (the FANUC's
     file gives its joints κθ only): a link bending out of the plane of its joint's
-    motion, or twisting, which no joint spring can mimic."""
+    motion, or twisting, which no joint spring can mimic.
+
+    With `link`, candidates of the `link-compliance` group: the three springs (0) of
+    every fixed element without springs that carries something (a mass or a marker on
+    it or after it): a link that bends where it is joined to the next, a tool that turns
+    on its flange, a base that tilts on its mount."""
+    springs = list(robot.springs)
     if lateral:
-        springs = list(robot.springs)
         for e in robot.drive:
             springs[e] = (springs[e][0], True, True)
-        if tuple(springs) != robot.springs:
-            robot = dataclasses.replace(robot, springs=tuple(springs))
+    if link:
+        carries = set(robot.mass_element) | set(robot.marker_element)
+        for e in reversed(range(len(robot.names))):  # children come after their parents
+            if e in carries and robot.parents[e] >= 0:
+                carries.add(robot.parents[e])
+        for e in carries:
+            if not robot.coupling[e] and not any(springs[e]):
+                springs[e] = (True, True, True)
+    if tuple(springs) != robot.springs:
+        robot = dataclasses.replace(robot, springs=tuple(springs))
     if not laws:
         if compensators:
             raise ValueError("compensators: spring laws are not among the candidates")

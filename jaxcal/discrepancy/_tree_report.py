@@ -22,6 +22,7 @@ WORDS = {
     "origins": "joint origin error",
     "joint-compliance": "joint compliance",
     "lateral-compliance": "lateral compliance",
+    "link-compliance": "link compliance",
     "masses": "mass",
     "spring-laws": "spring law",
 }
