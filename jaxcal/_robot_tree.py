@@ -52,9 +52,12 @@ def as_tree(robot: Robot) -> TreeRobot:
         ("J3", (a2, zero, zero)),
         ("crank", (a1, zero, d1)),
         ("J4", (d4, zero, a3)),
+        ("wrist", (zero, zero, d6)),
     ):
         origin = origin.at[at[name], :3].set(jnp.stack(xyz))
     springs = [at[f"J{j}"] for j in range(1, 7)]
+    # The wrist's masses sit on J6, whose axes are Rw's permuted (`quasi_serial.py`).
+    on_j6 = jnp.asarray([k for k, e in enumerate(tree.mass_element) if e == at["J6"]], int)
     tool = robot.tool_point
     laws = tree.laws
     if robot.has_compensator:
@@ -70,12 +73,15 @@ def as_tree(robot: Robot) -> TreeRobot:
         (
             origin,
             tree.compliance.at[jnp.asarray(springs), 0].set(robot.compliance),
-            jnp.stack([d6 + tool[0], tool[1], tool[2]])[None],
+            tool[None],
             robot.mass_kg,
-            robot.mass_at,
+            robot.mass_at.at[on_j6].set(robot.mass_at[on_j6][:, ::-1] * _J6_AXES),
             robot.joint_limits,
         ),
     )
 
 
 _LIMITS = np.tile(np.radians([-90.0, 90.0]), (6, 1))
+#: Rw's `(x, y, z)` is J6's `(z, y, -x)`: J6's coordinates of a point are Rw's reversed,
+#: the first negated.
+_J6_AXES = np.array([-1.0, 1.0, 1.0])

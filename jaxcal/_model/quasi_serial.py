@@ -11,8 +11,12 @@ The tree reproduces the specification's frames exactly:
   so that with the parallelogram φ3 = q3 + θ3 is the upper arm's absolute angle and the
   spring of joint 2 translates the upper arm without turning it; `link3` is `R3`;
 - `crank`, the parallelogram's lower edge, turns with φ3 about the joint-2 axis;
-- `J4`, `J5`, `J6` are the wrist's `Rx(φ4)·Ry(φ5)·Rx(φ6)`; `wrist` is `Rw` at the wrist
-  centre, carrying the marker `tool` at `(d6, 0, 0) + tool_point_m`.
+- `J4`, `J5`, `J6` are the wrist's `Rx(φ4)·Ry(φ5)·Rx(φ6)`; `J6` carries the wrist's
+  masses (its frame is `Rw` at the wrist centre, axes permuted: `(x, y, z)` of Rw is
+  `(z, y, −x)` of J6); `wrist` is `Rw` at the flange, `d6` along Rw's x, carrying the
+  marker `tool` at `tool_point_m`. Springs that a robot file gives the `wrist` then
+  turn the tool on its flange, as the FANUC form's tool compliance does (J6's lateral
+  springs would turn it, and the wrist's masses, about the wrist centre).
 
 Each joint has its joint spring only (the specification's VJM); the compensator is a
 spring law on joint 2. A plain serial variant (`"parallelogram": false`) turns the upper
@@ -29,7 +33,7 @@ from .rotations import rpy_from_matrix
 
 __all__ = ["is_quasi_serial", "tree_dict_from_quasi_serial"]
 
-_BODY = {"link2": "link2", "link3": "link3", "crank": "crank_body", "wrist": "wrist"}
+_BODY = {"link2": "link2", "link3": "link3", "crank": "crank_body", "wrist": "J6"}
 
 
 def _rx(a: float) -> np.ndarray:
@@ -115,7 +119,7 @@ def tree_dict_from_quasi_serial(d: dict) -> dict:
         joint("J4", "link3", 4, O4, (g["d4"], 0.0, g["a3"])),
         joint("J5", "J4", 5, O4.T @ O2),
         joint("J6", "J5", 6, O2.T @ O4),
-        fixed("wrist", "J6", O4.T),
+        fixed("wrist", "J6", O4.T, (0.0, 0.0, g["d6"])),  # J6's z is Rw's x
     ]
     if not parallelogram:
         # The crank turns with the upper arm's absolute angle φ3 = q3 + θ3 − θ2.
@@ -129,7 +133,10 @@ def tree_dict_from_quasi_serial(d: dict) -> dict:
         body = m.get("body")
         if body not in _BODY:
             raise ValueError(f"robot file: masses[{i}].body {body!r} not one of {list(_BODY)}")
-        masses.append({"element": _BODY[body], "kg": float(m["kg"]), "at_m": list(m["at_m"])})
+        at = [float(v) for v in m["at_m"]]
+        if body == "wrist":  # on J6: Rw's (x, y, z) is J6's (z, y, -x)
+            at = [-at[2], at[1], at[0]]
+        masses.append({"element": _BODY[body], "kg": float(m["kg"]), "at_m": at})
     comp = d.get("compensator")
     laws = []
     if comp is not None:
@@ -147,7 +154,7 @@ def tree_dict_from_quasi_serial(d: dict) -> dict:
             {
                 "name": "tool",
                 "element": "wrist",
-                "at_m": [g["d6"] + tool[0], tool[1], tool[2]],
+                "at_m": tool,
             }
         ],
         "spring_laws": laws,

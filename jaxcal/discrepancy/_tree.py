@@ -156,7 +156,11 @@ def _forward(
         rss0 = float(res @ res)
         scale2 = (rss0 - drop) / max(N - len(A) - s.size, 1)
         size = _size(cal.table, cal.estimate, cols[i], *_step(B, s, V, res, scale2))
-        if any(d["high95"] < 0 for d, k in zip(size, cols[i], strict=True) if positive[k]):
+        # A parameter no seen direction moves (an alias of a fitted one: a flange's spring
+        # about the last joint's axis) stays put; its sign is round-off, not physics.
+        moved = np.linalg.norm(V, axis=1) > PIVOT_RCOND
+        seen = [positive[k] and m for k, m in zip(cols[i], moved, strict=True)]
+        if any(d["high95"] < 0 for d, ok in zip(size, seen, strict=True) if ok):
             steps_out.append(
                 {"label": cands[i].label, "delta_rss": drop, "unphysical": True, "size": size}
             )

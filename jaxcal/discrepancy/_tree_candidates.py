@@ -4,10 +4,9 @@ with a joint-stiffness nonlinearity and backlash on every joint (and a compensat
 the joints asked for) for the spring-law candidates, lateral springs on the joints
 whose elements lack them, and springs on the fixed elements that carry something.
 
-A tool compliance (the tool turning on the flange under a wrench at the tool) is no
-candidate here: absolute measurements under the robot's own weight load nothing beyond
-the last element but its masses, and under those it is the last element's own
-springs, which are candidates."""
+A tool compliance (the tool turning on the flange under a wrench at the tool) is the
+springs of the fixed element that carries the tool, a `link-compliance` candidate;
+under the robot's own weight alone only the masses beyond it load it."""
 
 from __future__ import annotations
 
