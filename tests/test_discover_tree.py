@@ -8,6 +8,8 @@
   frames, DH and joint compliances, lateral compliance is named, and the held-out mean
   error with it reaches the published full calibration's 3.12 mm (the comparison with
   our own full calibration, searched further, is in `benchmarks/README.md`);
+- a springy bracket (springs of a fixed element) on a small arm: named where it is,
+  not at the column that carries the arm, and nothing named on noise alone;
 - candidates per place and named errors.
 """
 

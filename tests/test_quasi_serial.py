@@ -9,7 +9,10 @@
 - the tree robot file round-trips, and robot-file faults get named errors;
 - absolute measurements determine the compensator that deflections cannot, and with the
   process wrench in the file (load columns) the springs the robot's weight leaves alone;
-- lateral springs after or before the joint, mass and spring-law parameters.
+- lateral springs after or before the joint, mass and spring-law parameters;
+- the FANUC form's tool compliance is the springs of the tree's flange element (to
+  second order in the tool's rotation), its joint nonlinearity the `joint_hardening`
+  law, and the tree's discovery names a tool compliance at the flange.
 """
 
 from __future__ import annotations
@@ -138,26 +141,45 @@ def test_springs_of_the_flange_are_the_fanuc_forms_tool_compliance(fanuc):
     rotation differently (exp(ξ) against Rz·Rx·Ry): the same to first order in ξ, so the
     gap between their deflections falls with c², 100-fold for c divided by 10 (to the
     next order's share, of the order of |ξ| ≈ 5 mrad here), and it is a small part of
-    what the compliance moves. (Forces only: the FANUC form's tool moment does its work
-    on the flange's rotation, so its tool compliance never feels one.)"""
+    what the compliance moves; under a force and a moment at the tool."""
     robot, tree = fanuc
     q = jnp.asarray(np.radians([20.0, 10.0, -15.0, 30.0, 40.0, -20.0]))
-    f = jnp.array([1000.0, -2000.0, 1500.0])
+    f, m = jnp.array([1000.0, -2000.0, 1500.0]), jnp.array([200.0, -100.0, 300.0])
     d = jaxcal.tree_to_dict(tree)
     (wrist,) = [el for el in d["elements"] if el["name"] == "wrist"]
-    rigid = jaxcal.deflection(robot, q, f)
+    rigid = jaxcal.deflection(robot, q, f, m)
 
     def gap_and_effect(c: float) -> tuple[float, float]:
         wrist.update(springs=["theta", "alpha", "beta"], compliance_urad_per_Nm=[c] * 3)
-        dp_tree, ok = jaxcal.tree_deflection(jaxcal.tree_from_dict(d), q, f)
+        dp_tree, ok = jaxcal.tree_deflection(jaxcal.tree_from_dict(d), q, f, m)
         tool = (jaxcal.ToolCompliance(compliance=jnp.asarray(c)),)
-        dp = jaxcal.deflection(eqx.tree_at(lambda r: r.effects, robot, tool), q, f)
+        dp = jaxcal.deflection(eqx.tree_at(lambda r: r.effects, robot, tool), q, f, m)
         assert bool(ok)
         return float(jnp.abs(dp_tree - dp).max()), float(jnp.abs(dp - rigid).max())
 
     (gap, effect), (gap10, _) = gap_and_effect(5.0), gap_and_effect(0.5)
     assert effect > 1e-3 and gap < 1e-2 * effect
     assert 80 < gap / gap10 < 125
+
+
+@pytest.mark.parametrize("joint", [2, 3])
+def test_joint_hardening_is_the_fanuc_forms_joint_nonlinearity(fanuc, joint):
+    """The FANUC form's joint nonlinearity `¼·c·θ⁴/(κ·θref²)` is the tree's
+    `joint_hardening` law `¼·h·(θ/θref)⁴` with `h = c·θref²/κ`: the same deflections to
+    the solvers' tolerance (joint 2 with its compensator, joint 3 behind the
+    parallelogram)."""
+    robot, tree = fanuc
+    q = jnp.asarray(np.radians([20.0, 10.0, -15.0, 30.0, 40.0, -20.0]))
+    f, m = jnp.array([1000.0, -2000.0, 1500.0]), jnp.array([200.0, -100.0, 300.0])
+    c = 0.05
+    d = jaxcal.tree_to_dict(tree)
+    h = c * 1e-3**2 / float(robot.compliance[joint - 1])  # θref = 1 mrad in both
+    d["spring_laws"].append({"law": "joint_hardening", "joint": f"q{joint}", "h_J": h})
+    dp_tree, ok = jaxcal.tree_deflection(jaxcal.tree_from_dict(d), q, f, m)
+    law = (jaxcal.JointNonlinearity(joint, jnp.asarray(c)),)
+    dp = jaxcal.deflection(eqx.tree_at(lambda r: r.effects, robot, law), q, f, m)
+    assert bool(ok) and float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 1e-7
+    np.testing.assert_allclose(dp_tree, dp, rtol=0, atol=1e-12)
 
 
 def _leaves_equal(a, b, rtol):

@@ -5,7 +5,8 @@ Justin (data: Tenhumberg & Bäuml, Humanoids 2021; see tests/data/convert_dlr_ag
 - forward kinematics against an independent numpy implementation of the modified DH
   convention and the public fixed frames;
 - the equilibrium: stationarity of the potential, derivatives against finite
-  differences, jit/vmap consistency;
+  differences, jit/vmap consistency; springs on fixed elements act as on elements
+  driven by joints held at 0;
 - bad absolute-measurement files get named errors (exit 2 from the command line);
 - identification recovers simulated truth within its stated uncertainty;
 - on the real data, the nominal model with only the camera frame and the markers

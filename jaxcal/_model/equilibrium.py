@@ -72,11 +72,12 @@ def total_potential(
 
 
 def tool_pose(robot: Robot, q: Float[Array, 6], x: Float[Array, " ndof"]):
-    """Tool point (m) and tool-frame rotation (base frame) at deflections `x`."""
+    """Tool point (m) and tool-frame rotation (base frame) at deflections `x`: a tool
+    moment does its work on the tool's frame, turned by a tool compliance if any."""
     theta, xi = x[:6], x[6:]
     fx = collect_effects(robot, q, theta, xi)
     P = forward(robot, q, theta, fx.sites)
-    return P.p_tool, P.Rw
+    return P.p_tool, P.Rt
 
 
 def equilibrium_residual(x, args):

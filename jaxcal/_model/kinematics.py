@@ -49,6 +49,8 @@ class Pose(NamedTuple):
     Rw: Float[Array, "3 3"]
     p_flange: Float[Array, 3]
     p_tool: Float[Array, 3]
+    #: The tool's frame: `Rw` turned on the flange by a tool compliance (else `Rw`).
+    Rt: Float[Array, "3 3"]
 
 
 def forward(
@@ -93,7 +95,7 @@ def forward(
     p_flange = p_wrist + Rw[:, 0] * d6
     Rt = Rw @ so3_exp(extra["tool"]) if "tool" in extra else Rw
     p_tool = p_flange + Rt @ robot.tool_point
-    return Pose(R1, p_j2, R_link2, p_elbow, R3, p_wrist, Rw, p_flange, p_tool)
+    return Pose(R1, p_j2, R_link2, p_elbow, R3, p_wrist, Rw, p_flange, p_tool, Rt)
 
 
 def tool_point(
