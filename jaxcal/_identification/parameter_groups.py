@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._model.tree import TreeRobot
+from .._model.tree import SPRINGS, TreeRobot
 
 __all__ = [
     "GROUPS",
@@ -179,12 +179,13 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                             typical,
                         )
                     )
-        elif g == "link-compliance":
+        else:  # the lateral springs of moving elements, or every spring of fixed ones
+            fixed = g == "link-compliance"
             for e in robot.elastic:
-                if e in moving:
+                if (e in moving) == fixed:
                     continue
-                for i, a in enumerate(("theta", "alpha", "beta")):
-                    if robot.springs[e][i]:
+                for i, a in enumerate(SPRINGS):
+                    if robot.springs[e][i] and (i > 0 or fixed):
                         out.append(
                             Parameter(
                                 f"{robot.names[e]}.k_{a}",
@@ -196,22 +197,6 @@ def parameter_table(robot: TreeRobot, groups: tuple[str, ...] = GROUPS) -> tuple
                                 _COMP,
                             )
                         )
-        else:
-            for e in moving:
-                for i, a in ((1, "alpha"), (2, "beta")):
-                    if not robot.springs[e][i]:
-                        continue
-                    out.append(
-                        Parameter(
-                            f"{robot.names[e]}.k_{a}",
-                            g,
-                            "compliance",
-                            (e, i),
-                            "µrad/(N·m)",
-                            1e6,
-                            _COMP,
-                        )
-                    )
     return tuple(out)
 
 

@@ -33,8 +33,9 @@ the link before the joint): `... · Ry(β) · Rx(φx) · Ry(φy) · Rz(θ + ...)
 
 Which of its three springs an element has is part of the topology (`springs`): all
 three by default. A fixed element may carry springs too (none by default), turning
-everything after it about its own axes, `... · Rz(θ + φz) · Rx(φx) · Ry(φy)`: a link
-that bends at a point of its own (VJM's link springs), a tool that turns on its flange.
+everything after it about its own axes, `... · Rz(θ + φz) · Rx(φx) · Ry(φy)` (the
+lateral ones placed as the robot's are): a link that bends at a point of its own (VJM's
+link springs), a tool that turns on its flange.
 Spring laws (`spring_laws.py`, e.g. a gravity compensator) act on a joint's link-side
 angle.
 

@@ -85,8 +85,8 @@ def element_poses(
     """Rotation and position of every element's frame in the robot's base frame, for
     commanded joint values `q` (rad; m for a prismatic joint) and spring deflections
     `phi` (one row `(φz, φx, φy)` per element with springs, in `robot.elastic` order,
-    rad; φz in m for a prismatic element; default zero). The lateral deflections of springs an
-    element does not have (`robot.springs`) are ignored."""
+    rad; φz in m for a prismatic element; default zero). The lateral deflections of
+    springs an element does not have (`robot.springs`) are ignored."""
     e = len(robot.names)
     dtype = robot.dh.dtype
     angles = jnp.asarray(robot.coupling_matrix(), dtype) @ q

@@ -3,8 +3,8 @@ the spring laws and an optional wrench, its implicit derivative, and what measur
 see of it (deflections, marker positions); the kinematics are `tree_kinematics.py`'s.
 
 The equilibrium minimises the total potential `U(φ) = V(q, φ) + ½ Σ φ²/κ` over the
-spring deflections φ (three per element with springs: about z, x, y), with `V` the gravity of
-the masses, the spring laws and the work of an external force. Its stationarity
+spring deflections φ (three per element with springs: about z, x, y), with `V` the
+gravity of the masses, the spring laws and the work of an external force. Its stationarity
 condition is written `φ + κ ⊙ ∂V/∂φ = 0`, which stays well posed when a compliance is
 zero (a rigid spring); a lost-motion law adds its deflection to its joint's row
 (`φ = κ·τ + extra(κ·τ)`, τ = −∂V/∂φ). It is solved as the fixed point
