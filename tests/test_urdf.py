@@ -522,6 +522,11 @@ def test_bad_urdfs_raise_errors_naming_the_problem(text, match):
         ({"joints": {"j9": {}}}, r"unknown key joints.'j9'"),
         ({"joints": {"j1": {"compliance": [1, 0, 0]}}}, r"did you mean 'compliance_urad_per_Nm'"),
         ({"joints": {"j1": {"locked_m": 0.1}}}, r"locked_m: 'j1' is revolute"),
+        (
+            {"joints": {"j2": {"springs": ["beta"], "limits_deg": [-1, 1]}}},
+            r"'j2' is a fixed joint; its entry gives only the springs of its link .* "
+            r"got \['limits_deg'\]",
+        ),
         ({"markers": [{"name": "m", "link": "zz"}]}, r"markers\[0\].link 'zz' is not a link"),
     ],
 )

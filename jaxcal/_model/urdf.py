@@ -50,7 +50,9 @@ units in their names):
 
 A joint entry may also give `coupling` (joint name → coefficient) and
 `commanded_coupling`, as in a tree robot file: a coupling that URDF's `<mimic>` of a
-single joint cannot say (a parallelogram's passive joint follows two joints).
+single joint cannot say (a parallelogram's passive joint follows two joints). A fixed
+joint's entry gives only the springs of its child link, a fixed element of the tree
+(`compliance_urad_per_Nm` and `springs`: none unless named).
 
 `locked_deg` (revolute, continuous) or `locked_m` (prismatic) turns a joint into a fixed
 frame at that position (a gripper's fingers, say); a joint mimicking a locked joint is
