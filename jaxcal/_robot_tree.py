@@ -14,7 +14,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._model.quasi_serial import tree_dict_from_quasi_serial
+from ._model.quasi_serial import tree_dict_from_quasi_serial, wrist_point_in_j6
 from ._model.tree import TreeRobot
 from ._model.tree_files import tree_from_dict
 from ._robot import Robot
@@ -56,7 +56,7 @@ def as_tree(robot: Robot) -> TreeRobot:
     ):
         origin = origin.at[at[name], :3].set(jnp.stack(xyz))
     springs = [at[f"J{j}"] for j in range(1, 7)]
-    # The wrist's masses sit on J6, whose axes are Rw's permuted (`quasi_serial.py`).
+    # The wrist's masses sit on J6 (`quasi_serial.py`).
     on_j6 = jnp.asarray([k for k, e in enumerate(tree.mass_element) if e == at["J6"]], int)
     tool = robot.tool_point
     laws = tree.laws
@@ -75,13 +75,10 @@ def as_tree(robot: Robot) -> TreeRobot:
             tree.compliance.at[jnp.asarray(springs), 0].set(robot.compliance),
             tool[None],
             robot.mass_kg,
-            robot.mass_at.at[on_j6].set(robot.mass_at[on_j6][:, ::-1] * _J6_AXES),
+            robot.mass_at.at[on_j6].set(wrist_point_in_j6(robot.mass_at[on_j6])),
             robot.joint_limits,
         ),
     )
 
 
 _LIMITS = np.tile(np.radians([-90.0, 90.0]), (6, 1))
-#: Rw's `(x, y, z)` is J6's `(z, y, -x)`: J6's coordinates of a point are Rw's reversed,
-#: the first negated.
-_J6_AXES = np.array([-1.0, 1.0, 1.0])

@@ -31,7 +31,7 @@ import numpy as np
 
 from .rotations import rpy_from_matrix
 
-__all__ = ["is_quasi_serial", "tree_dict_from_quasi_serial"]
+__all__ = ["is_quasi_serial", "tree_dict_from_quasi_serial", "wrist_point_in_j6"]
 
 _BODY = {"link2": "link2", "link3": "link3", "crank": "crank_body", "wrist": "J6"}
 
@@ -48,6 +48,13 @@ def _ry(a: float) -> np.ndarray:
 
 def _rpy_deg(R: np.ndarray) -> list[float]:
     return [round(math.degrees(v), 9) + 0.0 for v in rpy_from_matrix(R)]
+
+
+def wrist_point_in_j6(at):
+    """J6's coordinates of points given in Rw's, `(..., 3)` (numpy or JAX): Rw's
+    `(x, y, z)` is J6's `(z, y, −x)`, so the coordinates reverse and the first is
+    negated (exact: no rotation matrix's round-off)."""
+    return at[..., ::-1] * np.array([-1.0, 1.0, 1.0])
 
 
 def is_quasi_serial(d: dict) -> bool:
@@ -133,10 +140,10 @@ def tree_dict_from_quasi_serial(d: dict) -> dict:
         body = m.get("body")
         if body not in _BODY:
             raise ValueError(f"robot file: masses[{i}].body {body!r} not one of {list(_BODY)}")
-        at = [float(v) for v in m["at_m"]]
-        if body == "wrist":  # on J6: Rw's (x, y, z) is J6's (z, y, -x)
-            at = [-at[2], at[1], at[0]]
-        masses.append({"element": _BODY[body], "kg": float(m["kg"]), "at_m": at})
+        at = np.asarray(m["at_m"], np.float64)
+        if body == "wrist":  # on J6
+            at = wrist_point_in_j6(at)
+        masses.append({"element": _BODY[body], "kg": float(m["kg"]), "at_m": at.tolist()})
     comp = d.get("compensator")
     laws = []
     if comp is not None:

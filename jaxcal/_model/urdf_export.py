@@ -113,48 +113,26 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
         parent = root if robot.parents[i] < 0 else body[robot.parents[i]]
         A, B = _fixed_parts(o[i], dh[i])
         coupling = robot.coupling[i]
-        split = robot.lateral_before_joint and not np.allclose(B, np.eye(4), rtol=0, atol=0)
-        if not coupling and not any(robot.springs[i]):
-            joints[i] = [
-                f'<joint name={quoteattr(_unique(f"{el}_fixed", joint_names))} type="fixed">'
-                f"<parent link={quoteattr(parent)}/><child link={quoteattr(el)}/>"
-                f"{_origin(A @ B)}</joint>"
-            ]
-            continue
-        if not coupling:  # a fixed element with springs: a fixed joint with an entry
-            fixed = _unique(f"{el}_fixed", joint_names)
-            joints[i] = [
-                f'<joint name={quoteattr(fixed)} type="fixed">'
-                f"<parent link={quoteattr(parent)}/><child link={quoteattr(el)}/>"
-                f"{_origin(A if split else A @ B)}</joint>"
-            ]
-            has = zip(("theta", "alpha", "beta"), robot.springs[i], strict=True)
-            side_joints[fixed] = {
-                "springs": [s for s, h in has if h],
-                "compliance_urad_per_Nm": [float(c) * 1e6 for c in comp[i]],
-            }
-        if not coupling and split:  # springs before the DH row's θ, d (as a joint's)
-            body[i] = _unique(f"{el}__dh", links)
-            extra_links.append(body[i])
-            joints[i].append(
-                f'<joint name={quoteattr(_unique(f"{el}__dh", joint_names))} type="fixed">'
-                f"<parent link={quoteattr(el)}/><child link={quoteattr(body[i])}/>"
-                f"{_origin(B)}</joint>"
-            )
-        if not coupling:
-            continue
-        jname, slides = joint_of[i], robot.sliding[i]
+        elastic = bool(coupling) or any(robot.springs[i])
+        # Springs before the DH row's θ, d: the joint stops before them (see above).
+        split = (
+            elastic and robot.lateral_before_joint and not np.allclose(B, np.eye(4), rtol=0, atol=0)
+        )
         T = A if split else A @ B
-        if i in robot.drive:
-            j = robot.drive.index(i)
+        slides = robot.sliding[i]
+        axis = '<axis xyz="0 0 1"/>'
+        if not coupling:  # a fixed joint; with springs, they are its sidecar entry's
+            jname, kind, extra = _unique(f"{el}_fixed", joint_names), "fixed", ""
+        elif i in robot.drive:
+            jname, j = joint_of[i], robot.drive.index(i)
             kind = "prismatic" if slides else "revolute"
             lo, hi = lim[j]
-            extra = f'<limit lower="{_num(lo)}" upper="{_num(hi)}" effort="0" velocity="0"/>'
+            extra = f'{axis}<limit lower="{_num(lo)}" upper="{_num(hi)}" effort="0" velocity="0"/>'
         else:
-            j, _ = coupling[0]
+            jname, (j, _) = joint_of[i], coupling[0]
             kind = "prismatic" if slides else "continuous"
             extra = (
-                f"<mimic joint={quoteattr(robot.joint_names[j])} "
+                f"{axis}<mimic joint={quoteattr(robot.joint_names[j])} "
                 f'multiplier="{_num(coupling[0][1])}" offset="0"/>'
             )
             if slides:
@@ -162,7 +140,7 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
         text = [
             f"<joint name={quoteattr(jname)} type={quoteattr(kind)}>"
             f"<parent link={quoteattr(parent)}/><child link={quoteattr(el)}/>"
-            f'{_origin(T)}<axis xyz="0 0 1"/>{extra}</joint>'
+            f"{_origin(T)}{extra}</joint>"
         ]
         if split:
             body[i] = _unique(f"{el}__dh", links)
@@ -173,6 +151,8 @@ def tree_to_urdf(robot: TreeRobot, *, name: str | None = None) -> tuple[str, dic
                 f"{_origin(B)}</joint>"
             )
         joints[i] = text
+        if not elastic:
+            continue
         has = zip(("theta", "alpha", "beta"), robot.springs[i], strict=True)
         entry: dict[str, Any] = {
             "springs": [s for s, h in has if h],
