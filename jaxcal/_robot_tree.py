@@ -6,6 +6,12 @@ file form and every number from the robot's array fields, so that derivatives an
 batches over a `Robot` (a calibration's parameters, a simulation's robots as built) pass
 through to the tree: the FANUC-form capabilities computed on the tree take a `Robot` as
 they always did.
+
+The discrepancy workflow's model effects (`Robot.effects`) become what the tree writes
+them with: springs of its fixed elements, spring laws, the measurement frame. A tree
+turns an element by `Rz·Rx·Ry` of its springs' deflections where the FANUC form turns
+a site by `exp(ξ)`; the two agree to first order in the rotation (its second order is
+the gap, a fraction of a percent of what the effect moves at a few mrad).
 """
 
 from __future__ import annotations
@@ -14,10 +20,20 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._model.candidates import (
+    THETA_REF as EFFECT_THETA_REF,
+    CompensatorSpring,
+    JointNonlinearity,
+    LinkBending,
+    ToolCompliance,
+    TrackerRotation,
+)
 from ._model.quasi_serial import tree_dict_from_quasi_serial, wrist_point_in_j6
+from ._model.rotations import rpy_of, so3_exp
+from ._model.spring_laws import THETA_REF
 from ._model.tree import TreeRobot
 from ._model.tree_files import tree_from_dict
-from ._robot import Robot
+from ._robot import URAD, Robot
 from ._robot_file import robot_to_dict
 
 __all__ = ["as_tree"]
@@ -26,10 +42,17 @@ __all__ = ["as_tree"]
 def as_tree(robot: Robot) -> TreeRobot:
     """The `TreeRobot` of a quasi-serial `Robot`, equal to `load_tree` of its robot file
     and traceable in the robot's array fields (compliances, compensator, geometry, tool
-    point, masses, joint limits). Raises `ValueError` for a robot with model effects
-    (`Robot.effects`), which the tree writes as spring laws of its own."""
-    if robot.effects:
-        raise ValueError("robot: a robot with model effects has no quasi-serial tree form")
+    point, masses, joint limits, the effects' parameters).
+
+    Its model effects are the tree's: `ToolCompliance` the springs of the `wrist`
+    element (at the flange) about its z, x, y; `LinkBending(3)` the springs of `link3`
+    (at the elbow, x along the upper arm) about its z and y; `JointNonlinearity` a
+    `joint_hardening` law, `h = c·θref²/k`; `CompensatorSpring` a `compensator` law
+    (`s0 = (Kc·s0)/Kc`); `TrackerRotation` the measurement frame's rotation. Raises a
+    `ValueError` naming any other effect: `LinkBending(2)` (the parallelogram keeps
+    the upper arm's orientation while the lower arm bends, which no spring of a tree
+    does) and `Backlash` (a dead band in the spring's energy; the tree's `backlash` law
+    is one in its deflection) have no tree form."""
     # The structure from the file form, with numbers that only have to be valid there:
     # every one of them is replaced below by the robot's own (traced) value.
     stand_in = eqx.tree_at(
@@ -42,7 +65,9 @@ def as_tree(robot: Robot) -> TreeRobot:
         stand_in,
         (np.ones(len(robot.mass_names)), np.zeros((len(robot.mass_names), 3)), _LIMITS),
     )
-    tree = tree_from_dict(tree_dict_from_quasi_serial(robot_to_dict(stand_in)))
+    d = tree_dict_from_quasi_serial(robot_to_dict(stand_in))
+    _effect_structure(d, robot.effects)
+    tree = tree_from_dict(d)
     d1, a1, a2, a3, d4, d6 = (robot.geometry[i] for i in range(6))
     zero = jnp.zeros_like(d1)
     at = {n: i for i, n in enumerate(tree.names)}
@@ -55,30 +80,92 @@ def as_tree(robot: Robot) -> TreeRobot:
         ("wrist", (zero, zero, d6)),
     ):
         origin = origin.at[at[name], :3].set(jnp.stack(xyz))
-    springs = [at[f"J{j}"] for j in range(1, 7)]
+    compliance = tree.compliance.at[jnp.asarray([at[f"J{j}"] for j in range(1, 7)]), 0].set(
+        robot.compliance
+    )
     # The wrist's masses sit on J6 (`quasi_serial.py`).
     on_j6 = jnp.asarray([k for k, e in enumerate(tree.mass_element) if e == at["J6"]], int)
-    tool = robot.tool_point
-    laws = tree.laws
+    laws = list(tree.laws)
     if robot.has_compensator:
-        law = eqx.tree_at(
-            lambda c: (c.lc, c.l2, c.Kc, c.s0),
-            laws[0],
-            (robot.lc, robot.l2c, robot.Kc, robot.s0),
+        laws[0] = eqx.tree_at(
+            lambda c: (c.lc, c.l2, c.Kc, c.s0), laws[0], (robot.lc, robot.l2c, robot.Kc, robot.s0)
         )
-        laws = (law, *laws[1:])
+    world = tree.world
+    law = int(robot.has_compensator)  # the effects' laws follow the compensator's
+    for e in robot.effects:
+        if isinstance(e, ToolCompliance | LinkBending):
+            axes = [0, 1, 2] if isinstance(e, ToolCompliance) else [0, 2]
+            name = "wrist" if isinstance(e, ToolCompliance) else "link3"
+            compliance = compliance.at[at[name], jnp.asarray(axes)].set(e.compliance * URAD)
+        elif isinstance(e, JointNonlinearity):
+            # ¼·c·θ⁴/(k·θref²) of the FANUC form is the law's ¼·h·(θ/θref)⁴.
+            k = robot.compliance[e.joint - 1]
+            h = e.hardening * THETA_REF**4 / (k * EFFECT_THETA_REF**2)
+            laws[law] = eqx.tree_at(lambda x: x.h, laws[law], h)
+            law += 1
+        elif isinstance(e, CompensatorSpring):
+            # (Kc·s0)/Kc, 0 for an absent spring (then Kc = 0: no energy either way).
+            s0 = e.Kc_s0 / jnp.where(e.Kc == 0, 1.0, e.Kc)
+            laws[law] = eqx.tree_at(lambda x: (x.Kc, x.s0), laws[law], (e.Kc, s0))
+            law += 1
+        elif isinstance(e, TrackerRotation):
+            world = world.at[3:].set(rpy_of(so3_exp(e.angles * URAD)))
     return eqx.tree_at(
-        lambda t: (t.origin, t.compliance, t.marker_at, t.mass_kg, t.mass_at, t.joint_limits),
-        eqx.tree_at(lambda t: t.laws, tree, laws),
+        lambda t: (
+            t.origin,
+            t.compliance,
+            t.marker_at,
+            t.mass_kg,
+            t.mass_at,
+            t.joint_limits,
+            t.laws,
+            t.world,
+        ),
+        tree,
         (
             origin,
-            tree.compliance.at[jnp.asarray(springs), 0].set(robot.compliance),
-            tool[None],
+            compliance,
+            robot.tool_point[None],
             robot.mass_kg,
             robot.mass_at.at[on_j6].set(wrist_point_in_j6(robot.mass_at[on_j6])),
             robot.joint_limits,
+            tuple(laws),
+            world,
         ),
     )
+
+
+def _effect_structure(d: dict, effects) -> None:
+    """Add to the tree file `d` the springs and laws that `effects` are (their values
+    are set by `as_tree`); a `ValueError` names an effect without a tree form or a
+    spring given twice."""
+    elements = {el["name"]: el for el in d["elements"]}
+    given = set()
+    for e in effects:
+        if isinstance(e, ToolCompliance) or (isinstance(e, LinkBending) and e.joint == 3):
+            name = "wrist" if isinstance(e, ToolCompliance) else "link3"
+            if name in given:
+                raise ValueError(f"robot: two effects give the springs of {name!r}")
+            given.add(name)
+            springs = ["theta", "alpha", "beta"] if name == "wrist" else ["theta", "beta"]
+            elements[name]["springs"] = springs
+            elements[name]["compliance_urad_per_Nm"] = [1.0, float(name == "wrist"), 1.0]
+        elif isinstance(e, JointNonlinearity):
+            d["spring_laws"].append({"law": "joint_hardening", "joint": f"q{e.joint}", "h_J": 0.0})
+            # A stiffening joint's tangent stiffness takes the plain iteration's
+            # contraction past 1 at deflections of a few mrad (joint 5 of the FANUC at
+            # c = 0.05); the accelerated solver converges there.
+            d["equilibrium_solver"] = "accelerated"
+        elif isinstance(e, CompensatorSpring):
+            law = {"law": "compensator", "joint": "q2", "lc_m": e.lc, "l2_m": e.l2}
+            d["spring_laws"].append({**law, "Kc_N_per_m": 0.0, "s0_m": 0.0})
+        elif not isinstance(e, TrackerRotation):
+            label = f"{type(e).__name__}({e.joint})" if hasattr(e, "joint") else type(e).__name__
+            raise ValueError(
+                f"robot: the model effect {label} has no form on the robot's tree (only "
+                "ToolCompliance, LinkBending(3), JointNonlinearity, CompensatorSpring and "
+                "TrackerRotation have one)"
+            )
 
 
 _LIMITS = np.tile(np.radians([-90.0, 90.0]), (6, 1))

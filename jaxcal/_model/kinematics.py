@@ -51,6 +51,8 @@ class Pose(NamedTuple):
     p_tool: Float[Array, 3]
     #: The tool's frame: `Rw` turned on the flange by a tool compliance (else `Rw`).
     Rt: Float[Array, "3 3"]
+    #: The crank's frame: `R3` unbent by a bending of the upper arm at the elbow.
+    R_crank: Float[Array, "3 3"]
 
 
 def forward(
@@ -88,6 +90,9 @@ def forward(
             R3 = Rb @ R3
     # x of the link2 frame is the lower-arm direction u2 = (sin φ2, 0, cos φ2) in R1.
     p_elbow = p_j2 + a2 * R_link2[:, 0]
+    # The crank, on the joint-2 axis, turns with the upper arm's angle but not with its
+    # bending at the elbow.
+    R_crank = R3
     if "link3" in extra:
         R3 = R3 @ so3_exp(extra["link3"])
     p_wrist = p_elbow + R3 @ jnp.stack([d4, jnp.zeros_like(d4), a3])
@@ -95,7 +100,7 @@ def forward(
     p_flange = p_wrist + Rw[:, 0] * d6
     Rt = Rw @ so3_exp(extra["tool"]) if "tool" in extra else Rw
     p_tool = p_flange + Rt @ robot.tool_point
-    return Pose(R1, p_j2, R_link2, p_elbow, R3, p_wrist, Rw, p_flange, p_tool, Rt)
+    return Pose(R1, p_j2, R_link2, p_elbow, R3, p_wrist, Rw, p_flange, p_tool, Rt, R_crank)
 
 
 def tool_point(
@@ -120,7 +125,7 @@ def mass_positions(robot: Robot, pose: Pose) -> Float[Array, "nmass 3"]:
     frames = {
         "link2": (pose.p_j2, pose.R_link2),
         "link3": (pose.p_elbow, pose.R3),
-        "crank": (pose.p_j2, pose.R3),
+        "crank": (pose.p_j2, pose.R_crank),
         "wrist": (pose.p_wrist, pose.Rw),
     }
     if not robot.mass_bodies:

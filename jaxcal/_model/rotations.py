@@ -18,6 +18,7 @@ __all__ = [
     "Rz",
     "angular_jacobian",
     "rpy_from_matrix",
+    "rpy_of",
     "skew",
     "so3_exp",
     "vee_rotation_derivative",
@@ -67,6 +68,14 @@ def so3_exp(r: Float[Array, 3]) -> Float[Array, "3 3"]:
     b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2s)
     K = skew(r)
     return jnp.eye(3, dtype=r.dtype) + a * K + b * (K @ K)
+
+
+def rpy_of(R: Float[Array, "3 3"]) -> Float[Array, 3]:
+    """Roll, pitch, yaw (rad) of a rotation matrix, `R = Rz(yaw) Ry(pitch) Rx(roll)`,
+    traceable (`rpy_from_matrix` is its host-side form, gimbal lock included); valid
+    away from pitch ±90°."""
+    pitch = jnp.arctan2(-R[2, 0], jnp.hypot(R[0, 0], R[1, 0]))
+    return jnp.stack([jnp.arctan2(R[2, 1], R[2, 2]), pitch, jnp.arctan2(R[1, 0], R[0, 0])])
 
 
 def vee_rotation_derivative(dR: Float[Array, "3 3"], R: Float[Array, "3 3"]) -> Float[Array, 3]:

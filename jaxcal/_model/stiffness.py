@@ -83,12 +83,6 @@ def compliance_at(
 
 
 def _prepared(robot, q, force, at):
-    if isinstance(robot, Robot) and robot.effects:
-        raise ValueError(
-            "robot: eq. (18) is computed on the robot's tree, which has no form for the "
-            "discrepancy workflow's model effects (Robot.effects); a tree robot's spring "
-            "laws and lateral springs are its extensions"
-        )
     tree = as_tree(robot) if isinstance(robot, Robot) else robot
     if not isinstance(tree, TreeRobot):
         raise ValueError(f"robot must be a Robot or a TreeRobot, got {type(robot).__name__}")
