@@ -40,6 +40,7 @@ from jaxcal.internal import (
     pivoted_subset,
     scaled_jacobian,
     split_rows,
+    spring_residual,
 )
 from jaxcal.internal.cli import main
 
@@ -205,6 +206,41 @@ def test_equilibrium_is_stationary_and_differentiable(justin, data, factor, solv
     # Within the looser solve's accuracy: ρ/(1 − ρ)·JACOBIAN_RTOL of the adjoint's size
     # (ρ < 0.5), or a few JACOBIAN_RTOL.
     np.testing.assert_allclose(loose, rev, rtol=JACOBIAN_RTOL if plain else 10 * JACOBIAN_RTOL)
+
+
+def test_a_balance_that_is_no_minimum_is_not_an_equilibrium():
+    """The accelerated solver can settle where the springs balance the load at a saddle of
+    the potential (the plain iteration cannot: its map expands there); that is flagged,
+    not returned as an equilibrium. The FANUC's tree with k2 = k3 = 100 µrad/(N·m),
+    700 times its own: at the sixth reference pose under its load the balance found is a
+    saddle (an eigenvalue of the potential's Hessian, scaled by the compliances, below
+    zero; numpy's eigenvalues of the residual's derivative)."""
+    fanuc = jaxcal.load_robot()
+    p = jaxcal.get_parameters(fanuc).at[1].set(100.0).at[2].set(100.0)
+    floppy = jaxcal.set_parameters(fanuc, p)
+    tree = dataclasses.replace(jaxcal.as_tree(floppy), equilibrium_solver="accelerated")
+    rows = jaxcal.read_dataset(DATA.parent / "reference_deflections.csv", fanuc)
+    q, f = jnp.asarray(rows.q[5]), jnp.asarray(rows.force[5])
+
+    rows_ = np.flatnonzero(tree.spring_mask())
+
+    @jax.jit
+    def balance():
+        eq = jaxcal.tree_equilibrium(tree, q, force=f)
+
+        def r(v):
+            phi = eq.phi.reshape(-1).at[rows_].set(v).reshape(eq.phi.shape)
+            return spring_residual(phi, (tree, q, f, None, 0)).reshape(-1)[rows_]
+
+        v = eq.phi.reshape(-1)[rows_]
+        return eq.converged, r(v), jax.jacfwd(r)(v)
+
+    converged, residual, A = balance()
+    assert float(jnp.max(jnp.abs(residual))) < 1e-12  # the springs balance the load ...
+    s = np.sqrt(np.asarray(tree.compliance)[np.asarray(tree.elastic)].reshape(-1)[rows_])
+    S = np.asarray(A) * s[None, :] / s[:, None]  # I + κ^½ ∇²V κ^½
+    assert np.linalg.eigvalsh(0.5 * (S + S.T)).min() < 0  # ... at a saddle,
+    assert not bool(converged)  # which is no equilibrium
 
 
 def test_cartesian_compliance_is_the_full_models_response_to_a_small_wrench(justin, data):

@@ -34,7 +34,7 @@ from .._robot_tree import as_tree
 from .rotations import angular_jacobian
 from .tree import TreeRobot
 from .tree_kinematics import marker_index, marker_pose
-from .tree_statics import check_load, spring_compliance, spring_residual, tree_equilibrium
+from .tree_statics import check_load, spring_residual, stable_balance, tree_equilibrium
 
 __all__ = ["cartesian_compliance", "cartesian_stiffness", "compliance_at"]
 
@@ -71,15 +71,7 @@ def compliance_at(
     lu, perm = lu_factor(A)
     X = jax.vmap(lambda b: lu_solve(lu, perm, -b), in_axes=1, out_axes=1)(B)
     C = J @ X
-    # Stability: `A = I + κ∇²V` scaled to `I + κ^½ ∇²V κ^½`; a rigid spring's row
-    # (κ = 0, `A`'s row the identity's) is no direction of motion.
-    kappa = spring_compliance(robot).reshape(-1)[rows]
-    s = jnp.sqrt(jnp.clip(kappa, 0.0, None))
-    rigid = s == 0.0
-    safe = jnp.where(rigid, 1.0, s)
-    S = A * safe[None, :] / safe[:, None]
-    S = jnp.where(rigid[:, None] | rigid[None, :], jnp.eye(S.shape[0], dtype=S.dtype), S)
-    return 0.5 * (C + C.T), is_positive_definite(S)
+    return 0.5 * (C + C.T), stable_balance(robot, A)
 
 
 def _prepared(robot, q, force, at):

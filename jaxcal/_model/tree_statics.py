@@ -15,9 +15,10 @@ Agile Justin's poses). Springs soft enough to take ρ towards 1 or past it
 stall in its step budget or diverge although the equilibrium is stable: a robot
 file's `"equilibrium_solver": "accelerated"` then solves it, and its derivative, with
 Anderson acceleration (`_linalg/anderson.py`; a fifth more compile time, so not the
-default). Derivatives with respect to every parameter
-come from the implicit function theorem, with no host callback in the compiled program
-(so it is cached). Its linear system is solved one of two ways,
+default). Unlike the plain iteration it can settle on a saddle of the potential, so its
+balance counts as converged only where it is a minimum (`is_stable`). Derivatives with
+respect to every parameter come from the implicit function theorem, with no host
+callback in the compiled program (so it is cached). Its linear system is solved one of two ways,
 by the robot's number of springs (`DENSE_SPRINGS`):
 
 - many springs (Agile Justin's 60): by the same contraction (`_linalg/iterative.py`),
@@ -42,6 +43,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._linalg.anderson import AndersonAcceleration
+from .._linalg.dense import is_positive_definite
 from .._linalg.iterative import formed_solve, implicit_solve
 from .rotations import vee_rotation_derivative
 from .spring_laws import SpringLaw
@@ -62,6 +64,8 @@ __all__ = [
     "check_load",
     "spring_compliance",
     "spring_residual",
+    "stable_balance",
+    "is_stable",
     "TreeEquilibrium",
     "tree_equilibrium",
     "tree_deflection",
@@ -186,6 +190,38 @@ def spring_residual(phi, args):
     return res
 
 
+def stable_balance(robot: TreeRobot, A: Float[Array, "s s"]) -> Bool[Array, ""]:
+    """Whether `A = ∂r/∂φ` on the robot's springs (`spring_mask`'s entries, in order)
+    belongs to a minimum of the potential: `A = I + κ∇²V` scaled to
+    `I + κ^½ ∇²V κ^½` is positive definite (a rigid spring's row, κ = 0, is the
+    identity's: no direction of motion)."""
+    rows = np.flatnonzero(robot.spring_mask())
+    kappa = spring_compliance(robot).reshape(-1)[jnp.asarray(rows)]
+    s = jnp.sqrt(jnp.clip(kappa, 0.0, None))
+    rigid = s == 0.0
+    safe = jnp.where(rigid, 1.0, s)
+    S = A * safe[None, :] / safe[:, None]
+    S = jnp.where(rigid[:, None] | rigid[None, :], jnp.eye(S.shape[0], dtype=S.dtype), S)
+    return is_positive_definite(S)
+
+
+def is_stable(robot, q, phi, force, moment, at: int) -> Bool[Array, ""]:
+    """Whether the equilibrium `phi` is a minimum of the potential (`stable_balance` of
+    the residual's derivative, formed on the springs: one forward pass per spring). A
+    flag, so nothing of it is differentiated."""
+    robot, q, phi, force, moment = jax.tree_util.tree_map(
+        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a,
+        (robot, q, phi, force, moment),
+    )
+    rows = jnp.asarray(np.flatnonzero(robot.spring_mask()))
+
+    def residual(v):
+        full = phi.reshape(-1).at[rows].set(v).reshape(phi.shape)
+        return spring_residual(full, (robot, q, force, moment, at)).reshape(-1)[rows]
+
+    return stable_balance(robot, jax.jacfwd(residual)(phi.reshape(-1)[rows]))
+
+
 def _step(phi, args):
     return phi - spring_residual(phi, args)
 
@@ -231,6 +267,11 @@ def tree_equilibrium(
     tol = 10.0 * _tolerance(q.dtype)
     change = jnp.max(jnp.abs(spring_residual(phi, (robot, q, force, moment, at))))
     ok = (change <= tol * (1.0 + jnp.max(jnp.abs(phi)))) & jnp.all(jnp.isfinite(phi))
+    if robot.equilibrium_solver == "accelerated":
+        # The plain iteration cannot settle on a saddle of the potential (there the map
+        # expands: an eigenvalue of `κ∇²V` below −1), the accelerated one can: a
+        # balance that is no minimum is no equilibrium a robot holds.
+        ok = ok & is_stable(robot, q, phi, force, moment, at)
     return TreeEquilibrium(phi=phi, converged=ok)
 
 

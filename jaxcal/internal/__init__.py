@@ -54,7 +54,10 @@ from .._model.candidates import THETA_REF as THETA_REF
 from .._model.rotations import Rx as Rx, Ry as Ry, Rz as Rz, rpy_from_matrix as rpy_from_matrix
 from .._model.simulate import batch_deflections as batch_deflections
 from .._model.tree_kinematics import gravity_potential as gravity_potential
-from .._model.tree_statics import DERIVATIVE_RTOL as DERIVATIVE_RTOL
+from .._model.tree_statics import (
+    DERIVATIVE_RTOL as DERIVATIVE_RTOL,
+    spring_residual as spring_residual,
+)
 from .._robot import URAD as URAD, G as G
 from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._tree import robot_covariance as robot_covariance, tree_rows as tree_rows
