@@ -222,22 +222,22 @@ def test_a_balance_that_is_no_minimum_is_not_an_equilibrium():
     rows = jaxcal.read_dataset(DATA.parent / "reference_deflections.csv", fanuc)
     q, f = jnp.asarray(rows.q[5]), jnp.asarray(rows.force[5])
 
-    rows_ = np.flatnonzero(tree.spring_mask())
+    springs = np.flatnonzero(tree.spring_mask())
 
     @jax.jit
     def balance():
         eq = jaxcal.tree_equilibrium(tree, q, force=f)
 
         def r(v):
-            phi = eq.phi.reshape(-1).at[rows_].set(v).reshape(eq.phi.shape)
-            return spring_residual(phi, (tree, q, f, None, 0)).reshape(-1)[rows_]
+            phi = eq.phi.reshape(-1).at[springs].set(v).reshape(eq.phi.shape)
+            return spring_residual(phi, (tree, q, f, None, 0)).reshape(-1)[springs]
 
-        v = eq.phi.reshape(-1)[rows_]
+        v = eq.phi.reshape(-1)[springs]
         return eq.converged, r(v), jax.jacfwd(r)(v)
 
     converged, residual, A = balance()
     assert float(jnp.max(jnp.abs(residual))) < 1e-12  # the springs balance the load ...
-    s = np.sqrt(np.asarray(tree.compliance)[np.asarray(tree.elastic)].reshape(-1)[rows_])
+    s = np.sqrt(np.asarray(tree.compliance)[np.asarray(tree.elastic)].reshape(-1)[springs])
     S = np.asarray(A) * s[None, :] / s[:, None]  # I + κ^½ ∇²V κ^½
     assert np.linalg.eigvalsh(0.5 * (S + S.T)).min() < 0  # ... at a saddle,
     assert not bool(converged)  # which is no equilibrium

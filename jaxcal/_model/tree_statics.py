@@ -18,8 +18,8 @@ Anderson acceleration (`_linalg/anderson.py`; a fifth more compile time, so not 
 default). Unlike the plain iteration it can settle on a saddle of the potential, so its
 balance counts as converged only where it is a minimum (`is_stable`). Derivatives with
 respect to every parameter come from the implicit function theorem, with no host
-callback in the compiled program (so it is cached). Its linear system is solved one of two ways,
-by the robot's number of springs (`DENSE_SPRINGS`):
+callback in the compiled program (so it is cached). Its linear system is solved one of
+two ways, by the robot's number of springs (`DENSE_SPRINGS`):
 
 - many springs (Agile Justin's 60): by the same contraction (`_linalg/iterative.py`),
   a few Hessian-vector products per derivative direction instead of one per spring to
