@@ -19,6 +19,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
 from ._model.candidates import (
     THETA_REF as EFFECT_THETA_REF,
@@ -31,7 +32,7 @@ from ._model.candidates import (
 from ._model.quasi_serial import tree_dict_from_quasi_serial, wrist_point_in_j6
 from ._model.rotations import rpy_of, so3_exp
 from ._model.spring_laws import THETA_REF
-from ._model.tree import TreeRobot
+from ._model.tree import SPRINGS, TreeRobot
 from ._model.tree_files import tree_from_dict
 from ._robot import URAD, Robot
 from ._robot_file import robot_to_dict
@@ -93,10 +94,10 @@ def as_tree(robot: Robot) -> TreeRobot:
     world = tree.world
     law = int(robot.has_compensator)  # the effects' laws follow the compensator's
     for e in robot.effects:
-        if isinstance(e, ToolCompliance | LinkBending):
-            axes = [0, 1, 2] if isinstance(e, ToolCompliance) else [0, 2]
-            name = "wrist" if isinstance(e, ToolCompliance) else "link3"
-            compliance = compliance.at[at[name], jnp.asarray(axes)].set(e.compliance * URAD)
+        if (site := _spring_site(e)) is not None:
+            name, springs, c = site
+            axes = jnp.asarray([SPRINGS.index(a) for a in springs])
+            compliance = compliance.at[at[name], axes].set(c * URAD)
         elif isinstance(e, JointNonlinearity):
             # ¼·c·θ⁴/(k·θref²) of the FANUC form is the law's ¼·h·(θ/θref)⁴.
             k = robot.compliance[e.joint - 1]
@@ -135,6 +136,18 @@ def as_tree(robot: Robot) -> TreeRobot:
     )
 
 
+def _spring_site(effect) -> tuple[str, tuple[str, ...], Array] | None:
+    """The fixed element whose springs a bending effect is, which of them, and their
+    compliance (µrad/(N·m)); `None` for an effect of another kind (a `LinkBending(2)`
+    has none)."""
+    if isinstance(effect, ToolCompliance):
+        return "wrist", SPRINGS, effect.compliance  # about the flange frame's z, x, y
+    if isinstance(effect, LinkBending) and effect.joint == 3:
+        # About z and y; x is along the upper arm.
+        return "link3", ("theta", "beta"), effect.compliance
+    return None
+
+
 def _effect_structure(d: dict, effects) -> None:
     """Add to the tree file `d` the springs and laws that `effects` are (their values
     are set by `as_tree`); a `ValueError` names an effect without a tree form or a
@@ -142,14 +155,13 @@ def _effect_structure(d: dict, effects) -> None:
     elements = {el["name"]: el for el in d["elements"]}
     given = set()
     for e in effects:
-        if isinstance(e, ToolCompliance) or (isinstance(e, LinkBending) and e.joint == 3):
-            name = "wrist" if isinstance(e, ToolCompliance) else "link3"
+        if (site := _spring_site(e)) is not None:
+            name, springs, _ = site
             if name in given:
                 raise ValueError(f"robot: two effects give the springs of {name!r}")
             given.add(name)
-            springs = ["theta", "alpha", "beta"] if name == "wrist" else ["theta", "beta"]
-            elements[name]["springs"] = springs
-            elements[name]["compliance_urad_per_Nm"] = [1.0, float(name == "wrist"), 1.0]
+            elements[name]["springs"] = list(springs)
+            elements[name]["compliance_urad_per_Nm"] = [float(a in springs) for a in SPRINGS]
         elif isinstance(e, JointNonlinearity):
             d["spring_laws"].append({"law": "joint_hardening", "joint": f"q{e.joint}", "h_J": 0.0})
             # A stiffening joint's tangent stiffness takes the plain iteration's

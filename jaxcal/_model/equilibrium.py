@@ -29,6 +29,7 @@ from .compensator import spring_energy as _compensator_potential
 from .effects import collect_effects, observe_effects
 from .kinematics import forward, mass_positions
 from .rotations import angular_jacobian
+from .tree_statics import stop_gradients
 
 __all__ = [
     "Equilibrium",
@@ -258,13 +259,6 @@ def deflection(
     """
     dp, ok = solve_deflection(robot, q, force, moment)
     return eqx.error_if(dp, ~ok, "static equilibrium did not converge or is not stable")
-
-
-def stop_gradients(tree):
-    """`tree` with `jax.lax.stop_gradient` on every array leaf."""
-    return jax.tree_util.tree_map(
-        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a, tree
-    )
 
 
 @jax.jit

@@ -66,6 +66,7 @@ __all__ = [
     "spring_residual",
     "stable_balance",
     "is_stable",
+    "stop_gradients",
     "TreeEquilibrium",
     "tree_equilibrium",
     "tree_deflection",
@@ -205,14 +206,18 @@ def stable_balance(robot: TreeRobot, A: Float[Array, "s s"]) -> Bool[Array, ""]:
     return is_positive_definite(S)
 
 
+def stop_gradients(tree):
+    """`tree` with `jax.lax.stop_gradient` on every array leaf."""
+    return jax.tree_util.tree_map(
+        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a, tree
+    )
+
+
 def is_stable(robot, q, phi, force, moment, at: int) -> Bool[Array, ""]:
     """Whether the equilibrium `phi` is a minimum of the potential (`stable_balance` of
     the residual's derivative, formed on the springs: one forward pass per spring). A
     flag, so nothing of it is differentiated."""
-    robot, q, phi, force, moment = jax.tree_util.tree_map(
-        lambda a: jax.lax.stop_gradient(a) if eqx.is_array(a) else a,
-        (robot, q, phi, force, moment),
-    )
+    robot, q, phi, force, moment = stop_gradients((robot, q, phi, force, moment))
     rows = jnp.asarray(np.flatnonzero(robot.spring_mask()))
 
     def residual(v):
