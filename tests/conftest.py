@@ -46,10 +46,9 @@ gc.set_threshold(100_000, 50, 1000)
 # only runs later; a stale figure only costs balance.
 _SLOWEST_FILES = {
     "test_design_bound.py": 151,
-    "test_tree.py": 100,
     "test_quasi_serial.py": 115,
     "test_discrepancy.py": 110,
-    "test_discover_tree.py": 82,
+    "test_tree.py": 100,
     "test_montecarlo.py": 67,
     "test_compensation.py": 61,
     "test_design.py": 54,
@@ -57,6 +56,7 @@ _SLOWEST_FILES = {
     "test_urdf_export.py": 33,
     "test_identification.py": 31,
     "test_distributed.py": 31,
+    "test_discover_tree.py": 30,
     "test_compensation_tree.py": 27,
     "test_cli_identify.py": 19,
     "test_equilibrium.py": 18,
