@@ -55,6 +55,23 @@ def test_factorisations_match_lapack(n, seed):
     assert bool(out["pd"]) == bool(np.linalg.eigvalsh(H)[0] > 0)
 
 
+@pytest.mark.parametrize("n", [31, 152])
+def test_eigenvalues_of_a_fits_normal_matrix(n):
+    """The rank test's eigenvalues at the sizes of a large calibration (Agile Justin's
+    full table: 152 parameters), odd and even, one pair of columns collinear: numpy's to
+    round-off, and the collinear pair's zero resolved far below `RCOND`."""
+    rng = np.random.default_rng(n)
+    J = rng.normal(size=(3 * n + 50, n)) * np.exp(rng.normal(size=n))
+    J[:, 1] = 2.0 * J[:, 0]
+    N = J.T @ J
+    d = np.sqrt(np.diag(N))
+    Ns = N / np.outer(d, d)
+    want = np.linalg.eigvalsh(Ns)
+    got = np.asarray(jax.jit(D.eigvalsh)(jnp.asarray(Ns)))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * want[-1])
+    assert abs(got[0]) < 1e-14 * got[-1] and got[1] > 1e-6 * got[-1]
+
+
 def test_partial_pivoting_handles_a_zero_leading_entry():
     A = jnp.array([[0.0, 1.0, 2.0], [1.0, 0.0, 3.0], [4.0, -3.0, 8.0]])
     b = jnp.array([1.0, 2.0, 3.0])
