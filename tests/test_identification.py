@@ -335,8 +335,14 @@ def test_method_init_once_then_fit_equals_identify(robot, example, method):
     res = fit(state, data.deflection)
     ref = identify(robot, data, method.name)
     assert res.names == ref.names and bool(res.converged)
-    np.testing.assert_allclose(res.estimate, ref.estimate, rtol=1e-9)
-    np.testing.assert_allclose(res.std, ref.std, rtol=1e-9)
+    # The closed-form methods agree to round-off. The nonlinear one is two programs
+    # (`identify` holds parameters by a traced mask, here none), whose round-off
+    # differs: Levenberg–Marquardt stops within its tolerance of the optimum (steps
+    # below 1e-5 of each parameter's value, `nonlinear_fit`'s rtol and atol), along the
+    # example's nearly undetermined Kc–s0 direction anywhere within it.
+    rtol = 1e-5 if method.name == "nonlinear" else 1e-9
+    np.testing.assert_allclose(res.estimate, ref.estimate, rtol=rtol)
+    np.testing.assert_allclose(res.std, ref.std, rtol=rtol)
     if method.name == "nonlinear":
         return  # its vmap/loop equality is test_vmap_equals_loop's
     rng = np.random.default_rng(1)
