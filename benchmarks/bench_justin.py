@@ -7,9 +7,10 @@ training rows do not determine one by one (relative std above 10 %) left fitted,
 held at the robot file's values (`hold_undetermined=True`); held-out error of both.
 
 With `--discover`, `jaxcal discover` on each split as a user runs it, from frames,
-joint offsets, DH and joint compliances (`--test 200 --seed S --json`, in a new
-process on a fresh compilation cache): the effects it names, the held-out error before
-and after them, and its time; it asserts the published claim that the suite does not
+joint offsets, DH and joint compliances (`--test 200 --seed S --json`, each in a new
+process on one compilation cache of this run: the first split compiles, the others
+read its programs): the effects it names, the held-out error before and after them,
+and its time; it asserts the published claim that the suite does not
 run (two minutes a split): lateral compliance is named, at torso_1 first, and the
 held-out mean with it reaches the published full calibration's 3.12 mm.
 
@@ -115,6 +116,11 @@ def discover(seeds: list[int]) -> None:
             )
             assert out["effect"].startswith("lateral-compliance"), out["effect"]
             assert out["where"]["lateral-compliance"][0] == "torso_1", out["where"]
+            for e in out["effects"]:
+                for d in e["size"]:
+                    assert d["low95"] <= d["value"] <= d["high95"] and d["unit"], d
+                assert 0 < e["change_rms_mm"] <= e["change_max_mm"], e
+            assert after["mean_mm"] < before["mean_mm"], (before, after)
             assert after["mean_mm"] <= PUBLISHED["lateral-compliance"][0], after
 
 

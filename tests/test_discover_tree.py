@@ -393,7 +393,6 @@ def test_ambiguous_families_are_said_and_poses_proposed(justin, data):
     assert found.to_json()["discrimination"]["between"] == [d.a, d.b]
 
 
-@pytest.mark.usefixtures("optimised_test")  # fits of 300 poses: compiled to run fast
 def test_tree_options_are_for_tree_robots(capsys):
     fanuc = str(DATA.parent / "example_calibration.csv")
     assert main(["discover", fanuc, "--params", "frames"]) == 2
