@@ -221,15 +221,15 @@ def eigvalsh(A: Float[Array, "n n"], sweeps: int = 12) -> Float[Array, " n"]:
     if m > n:
         A = jnp.zeros((m, m), A.dtype).at[:n, :n].set(A)
     partners = jnp.asarray(_round_robin(m))
-    first = jnp.arange(m)[None, :] < partners  # the lower index of each pair
+    idx = jnp.arange(m)
 
     def rotate(A, r):
         j = partners[r]
-        apq = A[jnp.arange(m), j]  # each index's entry with its partner (= A[j, i])
-        app, aqq = jnp.diagonal(A), jnp.diagonal(A)[j]
+        apq = A[idx, j]  # each index's entry with its partner (= A[j, i])
         # The angle of the pair (p, q), p its lower index, seen from either member.
-        lo = first[r]
-        a_pp, a_qq = jnp.where(lo, app, aqq), jnp.where(lo, aqq, app)
+        lo = idx < j
+        d = jnp.diagonal(A)
+        a_pp, a_qq = jnp.where(lo, d, d[j]), jnp.where(lo, d[j], d)
         nonzero = apq != 0
         theta = (a_qq - a_pp) / (2.0 * jnp.where(nonzero, apq, 1.0))
         t = jnp.where(theta >= 0, 1.0, -1.0) / (jnp.abs(theta) + jnp.sqrt(theta**2 + 1.0))
