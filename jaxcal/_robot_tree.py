@@ -23,6 +23,7 @@ from jaxtyping import Array
 
 from ._model.candidates import (
     THETA_REF as EFFECT_THETA_REF,
+    Backlash,
     CompensatorSpring,
     JointNonlinearity,
     LinkBending,
@@ -46,14 +47,12 @@ def as_tree(robot: Robot) -> TreeRobot:
     point, masses, joint limits, the effects' parameters).
 
     Its model effects are the tree's: `ToolCompliance` the springs of the `wrist`
-    element (at the flange) about its z, x, y; `LinkBending(3)` the springs of `link3`
-    (at the elbow, x along the upper arm) about its z and y; `JointNonlinearity` a
-    `joint_hardening` law, `h = c·θref²/k`; `CompensatorSpring` a `compensator` law
-    (`s0 = (Kc·s0)/Kc`); `TrackerRotation` the measurement frame's rotation. Raises a
-    `ValueError` naming any other effect: `LinkBending(2)` (the parallelogram keeps
-    the upper arm's orientation while the lower arm bends, which no spring of a tree
-    does) and `Backlash` (a dead band in the spring's energy; the tree's `backlash` law
-    is one in its deflection) have no tree form."""
+    element (at the flange) about its z, x, y; `LinkBending(2)` and `LinkBending(3)` the
+    springs of `link2` (at the joint-2 axis) and `link3` (at the elbow), x along the
+    arm, about their z and y; `JointNonlinearity` a `joint_hardening` law,
+    `h = c·θref²/k`; `Backlash` a `backlash` law of the same half-width;
+    `CompensatorSpring` a `compensator` law (`s0 = (Kc·s0)/Kc`); `TrackerRotation` the
+    measurement frame's rotation. Raises a `ValueError` naming any other effect."""
     # The structure from the file form, with numbers that only have to be valid there:
     # every one of them is replaced below by the robot's own (traced) value.
     stand_in = eqx.tree_at(
@@ -104,6 +103,9 @@ def as_tree(robot: Robot) -> TreeRobot:
             h = e.hardening * THETA_REF**4 / (k * EFFECT_THETA_REF**2)
             laws[law] = eqx.tree_at(lambda x: x.h, laws[law], h)
             law += 1
+        elif isinstance(e, Backlash):
+            laws[law] = eqx.tree_at(lambda x: x.b, laws[law], e.half_width * URAD)
+            law += 1
         elif isinstance(e, CompensatorSpring):
             # (Kc·s0)/Kc, 0 for an absent spring (then Kc = 0: no energy either way).
             s0 = e.Kc_s0 / jnp.where(e.Kc == 0, 1.0, e.Kc)
@@ -138,13 +140,12 @@ def as_tree(robot: Robot) -> TreeRobot:
 
 def _spring_site(effect) -> tuple[str, tuple[str, ...], Array] | None:
     """The fixed element whose springs a bending effect is, which of them, and their
-    compliance (µrad/(N·m)); `None` for an effect of another kind (a `LinkBending(2)`
-    has none)."""
+    compliance (µrad/(N·m)); `None` for an effect of another kind."""
     if isinstance(effect, ToolCompliance):
         return "wrist", SPRINGS, effect.compliance  # about the flange frame's z, x, y
-    if isinstance(effect, LinkBending) and effect.joint == 3:
-        # About z and y; x is along the upper arm.
-        return "link3", ("theta", "beta"), effect.compliance
+    if isinstance(effect, LinkBending):
+        # About z and y; x is along the arm.
+        return f"link{effect.joint}", ("theta", "beta"), effect.compliance
     return None
 
 
@@ -168,6 +169,8 @@ def _effect_structure(d: dict, effects) -> None:
             # contraction past 1 at deflections of a few mrad (joint 5 of the FANUC at
             # c = 0.05); the accelerated solver converges there.
             d["equilibrium_solver"] = "accelerated"
+        elif isinstance(e, Backlash):
+            d["spring_laws"].append({"law": "backlash", "joint": f"q{e.joint}", "b_urad": 0.0})
         elif isinstance(e, CompensatorSpring):
             law = {"law": "compensator", "joint": "q2", "lc_m": e.lc, "l2_m": e.l2}
             d["spring_laws"].append({**law, "Kc_N_per_m": 0.0, "s0_m": 0.0})
@@ -175,8 +178,8 @@ def _effect_structure(d: dict, effects) -> None:
             label = f"{type(e).__name__}({e.joint})" if hasattr(e, "joint") else type(e).__name__
             raise ValueError(
                 f"robot: the model effect {label} has no form on the robot's tree (only "
-                "ToolCompliance, LinkBending(3), JointNonlinearity, CompensatorSpring and "
-                "TrackerRotation have one)"
+                "LinkBending, ToolCompliance, Backlash, JointNonlinearity, CompensatorSpring "
+                "and TrackerRotation have one)"
             )
 
 

@@ -282,11 +282,18 @@ def test_eq18_moment_columns(robot, rows, compliance):
     np.testing.assert_allclose(central, compliance[i, :3, 3:] @ np.asarray(M), rtol=1e-6)
 
 
+class _Sag(jaxcal.AbstractEffect):
+    """A user's own effect (an extra energy), which the robot's tree cannot know."""
+
+    def energy(self, robot, q, theta, xi):
+        return 1e3 * theta[1] ** 2
+
+
 def test_eq18_of_a_robot_with_an_effect_without_a_tree_form_is_named(robot):
-    """Eq. (18) is computed on the robot's tree, which has no form for a dead band in the
-    spring's energy: a named error before any work, not a wrong matrix."""
-    r = eqx.tree_at(lambda r: r.effects, robot, (jaxcal.Backlash(1, 50.0),))
-    with pytest.raises(ValueError, match=r"model effect Backlash\(1\) has no form on the robot's"):
+    """Eq. (18) is computed on the robot's tree, which has no form for an effect it does
+    not know: a named error before any work, not a wrong matrix."""
+    r = eqx.tree_at(lambda r: r.effects, robot, (_Sag(),))
+    with pytest.raises(ValueError, match=r"model effect _Sag has no form on the robot's"):
         jaxcal.cartesian_stiffness(r, jnp.zeros(6))
 
 

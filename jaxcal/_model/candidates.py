@@ -24,6 +24,7 @@ from jaxtyping import Array, Float
 
 from .._robot import URAD, AbstractEffect, Robot
 from .rotations import so3_exp
+from .spring_laws import JointBacklash
 
 __all__ = [
     "LinkBending",
@@ -43,8 +44,6 @@ THETA_REF = 1e-3
 #: Smallest compliance (µrad/(N·m)) of an extra rotational spring, so that an absent
 #: effect (parameter 0) is a rigid-but-finite spring and its derivative exists at 0.
 _FLOOR = 1e-6
-#: Smallest smoothing width (rad) of the backlash dead band (see `Backlash`).
-_W0 = 1e-6
 
 
 def _spring(xi: Float[Array, " n"], c_urad: Float[Array, ""]) -> Float[Array, ""]:
@@ -63,9 +62,13 @@ class LinkBending(AbstractEffect):
 
         rotation at the site = (0, ξy, ξz) in the link frame,   E = ½·(ξy² + ξz²)/c
 
-    Bending about y acts like the joint spring (it is told apart only through the
-    compensator and gravity); bending about z moves the tool sideways, out of the arm's
-    plane, which no joint spring of the nominal model can do with the same lever arms.
+    Each turns everything after its site (the springs of the tree's `link2` or
+    `link3`, `as_tree`). Bending about z moves the tool sideways, out of the arm's plane,
+    which no joint spring of the nominal model can do with the same lever arms. About y
+    the lower arm's turns the upper arm with it, where θ2 (through the parallelogram)
+    translates it without turning it, and leaves the compensator's angle; the upper
+    arm's is θ3 but for the crank, which it leaves (told apart through the crank's
+    weight).
     """
 
     joint: int = eqx.field(static=True)
@@ -107,22 +110,19 @@ class ToolCompliance(AbstractEffect):
         return jnp.full((3,), (jnp.abs(self.compliance) + _FLOOR) * URAD)
 
 
-def _onehot(joint: int, dtype) -> Float[Array, 6]:
-    return jnp.zeros(6, dtype).at[joint - 1].set(1.0)
-
-
 class Backlash(AbstractEffect):
-    """Lost motion (a dead band of half-width `b`, µrad) in joint `joint`.
+    """Lost motion (a dead band of half-width `b`, µrad) in joint `joint`: the tree's
+    `backlash` law (`JointBacklash`), whose spring under the torque τ deflects by
 
-    The spring of the joint acts on a smoothed dead-zone deflection
-    `d(θ) = θ − b·tanh(θ/w)`, `w = 2·sqrt(b² + w0²)` (w0 = 1 µrad), so its energy is
-    `½ d(θ)²/k` instead of `½ θ²/k`; this effect adds the difference
-    `½ (d² − θ²)/k`. For |θ| ≫ w the torque is `(θ − b·sign θ)/k`: a joint that moves
-    by `b` before its spring takes load. `w ≥ 2b` keeps `d' ≥ ½`, so the energy stays
-    convex (Newton converges) and is smooth in `b` through 0. Unloaded joints with no
-    gravity torque (joint 1) sit in the middle of the band, so every load shows the full
-    lost motion `b`; gravity-preloaded joints show it only when a load reverses their
-    torque.
+        θ = x + b·tanh(x/w),   x = k·τ,   w = 2·sqrt(b² + w0²)   (w0 = 1 µrad),
+
+    written as the energy of θ that the equilibrium minimises (`energy_beyond_linear`:
+    its stationary points are those balances exactly). For |x| ≫ w the joint is offset
+    by `b·sign τ`: it moves by `b` before its spring takes load. The energy is convex
+    (the torque grows with θ, slope at least 1/(1.5·k)) and smooth in `b` through 0.
+    Unloaded joints with no gravity torque (joint 1) sit in the middle of the band, so
+    every load shows the full lost motion `b`; gravity-preloaded joints show it only
+    when a load reverses their torque.
     """
 
     joint: int = eqx.field(static=True)
@@ -133,11 +133,8 @@ class Backlash(AbstractEffect):
             raise ValueError(f"Backlash joint must be 1..6, got {self.joint}")
 
     def energy(self, robot, q, theta, xi):
-        b = self.half_width * URAD
-        t = theta[self.joint - 1]
-        w = 2.0 * jnp.sqrt(b**2 + _W0**2)
-        d = t - b * jnp.tanh(t / w)
-        return 0.5 * (d**2 - t**2) / robot.compliance[self.joint - 1]
+        law = JointBacklash(b=self.half_width * URAD, joint=self.joint - 1)
+        return law.energy_beyond_linear(theta[self.joint - 1], robot.compliance[self.joint - 1])
 
 
 class JointNonlinearity(AbstractEffect):

@@ -31,9 +31,9 @@ __all__ = [
 
 #: Sites where extra (non-joint) compliance can rotate the structure, used by the model
 #: extensions of the discrepancy workflow. Each takes a rotation vector (rad) in the
-#: body frame named: `link2` bends the lower arm about the joint-2 axis point (frame of
-#: body `link2`), `link3` bends the upper arm at the elbow (frame R3), `tool` rotates the
-#: tool about the flange (frame Rw).
+#: body frame named and turns everything after the site: `link2` bends the lower arm
+#: about the joint-2 axis point (frame of body `link2`), `link3` bends the upper arm at
+#: the elbow (frame R3), `tool` rotates the tool about the flange (frame Rw).
 EXTRA_SITES: tuple[str, ...] = ("link2", "link3", "tool")
 
 
@@ -80,19 +80,17 @@ def forward(
     p_j2 = R1 @ jnp.stack([a1, jnp.zeros_like(a1), d1])
     R_link2 = R1 @ Ry(phi[1] - jnp.pi / 2)
     R3 = R1 @ Ry(-phi3)
+    # The crank, on the joint-2 axis, turns with the upper arm's angle but not with the
+    # arms' bending.
+    R_crank = R3
     if "link2" in extra:
-        # Lower-arm bending: the elbow moves on a rotated lower arm. With the
-        # parallelogram the upper arm keeps its orientation (as for θ2); a serial arm
-        # turns with the lower arm.
+        # Lower-arm bending at its root: everything after it turns (the upper arm too,
+        # unlike θ2 through the parallelogram), as a spring on the tree's `link2` does.
         Rb = R_link2 @ so3_exp(extra["link2"]) @ R_link2.T
         R_link2 = Rb @ R_link2
-        if not robot.parallelogram:
-            R3 = Rb @ R3
+        R3 = Rb @ R3
     # x of the link2 frame is the lower-arm direction u2 = (sin φ2, 0, cos φ2) in R1.
     p_elbow = p_j2 + a2 * R_link2[:, 0]
-    # The crank, on the joint-2 axis, turns with the upper arm's angle but not with its
-    # bending at the elbow.
-    R_crank = R3
     if "link3" in extra:
         R3 = R3 @ so3_exp(extra["link3"])
     p_wrist = p_elbow + R3 @ jnp.stack([d4, jnp.zeros_like(d4), a3])
