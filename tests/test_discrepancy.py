@@ -218,10 +218,11 @@ def test_every_joint_of_joint_candidates_is_a_case():
 
 @pytest.mark.parametrize("case", EFFECTS)
 def test_hidden_effect_is_named(study, case):
-    # The claim allows 1 miss in 10 per case; the 10-seed studies (the preset and the
-    # perturbed truth, 170 data sets each) missed 1 and 2 in all, so a correct workflow
-    # names a case's data set with probability ≈ 0.99 and the 5 cases tested here with
-    # ≈ 0.95. Every one must be named: on fixed seeds a miss is reproducible, and a case
+    # The claim allows 1 miss in 10 per case (joint 2's nonlinearity falls short of it,
+    # 8 of 10: benchmarks/README.md); the 10-seed studies (the preset and the perturbed
+    # truth, 170 data sets each) missed 3 and 2 in all, so a correct workflow names a
+    # case's data set with probability ≈ 0.985 and the 5 cases tested here with ≈ 0.93.
+    # Every one must be named: on fixed seeds a miss is reproducible, and a case
     # that misses here is one to look at, not noise to tolerate.
     named = study[case]["named"]
     assert all(n == case for n in named), named
