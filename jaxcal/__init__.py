@@ -146,6 +146,7 @@ from ._model.simulate import (
 from ._model.spring_laws import (
     SPRING_LAWS as SPRING_LAWS,
     CompensatorLaw as CompensatorLaw,
+    CompensatorPreloadLaw as CompensatorPreloadLaw,
     JointBacklash as JointBacklash,
     JointHardening as JointHardening,
     SpringLaw as SpringLaw,

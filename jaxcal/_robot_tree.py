@@ -51,7 +51,7 @@ def as_tree(robot: Robot) -> TreeRobot:
     springs of `link2` (at the joint-2 axis) and `link3` (at the elbow), x along the
     arm, about their z and y; `JointNonlinearity` a `joint_hardening` law,
     `h = c·θref²/k`; `Backlash` a `backlash` law of the same half-width;
-    `CompensatorSpring` a `compensator` law (`s0 = (Kc·s0)/Kc`); `TrackerRotation` the
+    `CompensatorSpring` a `compensator_preload` law (the same parameters); `TrackerRotation` the
     measurement frame's rotation. Raises a `ValueError` naming any other effect."""
     # The structure from the file form, with numbers that only have to be valid there:
     # every one of them is replaced below by the robot's own (traced) value.
@@ -107,9 +107,7 @@ def as_tree(robot: Robot) -> TreeRobot:
             laws[law] = eqx.tree_at(lambda x: x.b, laws[law], e.half_width * URAD)
             law += 1
         elif isinstance(e, CompensatorSpring):
-            # (Kc·s0)/Kc, 0 for an absent spring (then Kc = 0: no energy either way).
-            s0 = e.Kc_s0 / jnp.where(e.Kc == 0, 1.0, e.Kc)
-            laws[law] = eqx.tree_at(lambda x: (x.Kc, x.s0), laws[law], (e.Kc, s0))
+            laws[law] = eqx.tree_at(lambda x: (x.Kc, x.Kc_s0), laws[law], (e.Kc, e.Kc_s0))
             law += 1
         elif isinstance(e, TrackerRotation):
             world = world.at[3:].set(rpy_of(so3_exp(e.angles * URAD)))
@@ -172,8 +170,8 @@ def _effect_structure(d: dict, effects) -> None:
         elif isinstance(e, Backlash):
             d["spring_laws"].append({"law": "backlash", "joint": f"q{e.joint}", "b_urad": 0.0})
         elif isinstance(e, CompensatorSpring):
-            law = {"law": "compensator", "joint": "q2", "lc_m": e.lc, "l2_m": e.l2}
-            d["spring_laws"].append({**law, "Kc_N_per_m": 0.0, "s0_m": 0.0})
+            law = {"law": "compensator_preload", "joint": "q2", "lc_m": e.lc, "l2_m": e.l2}
+            d["spring_laws"].append({**law, "Kc_N_per_m": 0.0, "Kc_s0_N": 0.0})
         elif not isinstance(e, TrackerRotation):
             label = f"{type(e).__name__}({e.joint})" if hasattr(e, "joint") else type(e).__name__
             raise ValueError(

@@ -212,6 +212,36 @@ def test_backlash_is_the_trees_backlash_law(fanuc, joint, b):
     np.testing.assert_allclose(dp_tree, dp, rtol=0, atol=1e-12)
 
 
+def test_compensator_preload_law_is_the_compensator_in_kc_and_its_preload():
+    """`compensator_preload` is `compensator` with the preload Kc·s0 (N) in place of
+    s0: the same torque at any angle; at an absent spring (Kc = Kc·s0 = 0) its torque
+    still moves with Kc·s0, the direction a fit started from "absent" needs, where
+    `compensator`'s s0 moves nothing; and a robot file with it round-trips."""
+    lc, l2, Kc, s0 = (jnp.asarray(v) for v in (0.235, 0.6, 8e4, 0.3))
+    plain = jaxcal.CompensatorLaw(lc=lc, l2=l2, Kc=Kc, s0=s0, joint=1)
+    preload = jaxcal.CompensatorPreloadLaw(lc=lc, l2=l2, Kc=Kc, Kc_s0=Kc * s0, joint=1)
+    phis = jnp.linspace(-1.2, 1.2, 7)
+    torque = lambda law: jax.vmap(jax.grad(law.potential))(phis)  # noqa: E731
+    np.testing.assert_allclose(torque(preload), torque(plain), rtol=1e-12)
+
+    def absent(v, cls, field):
+        zero = jnp.zeros(())
+        law = cls(lc=lc, l2=l2, Kc=zero, joint=1, **{field: v})
+        return jax.grad(law.potential)(jnp.asarray(0.4))
+
+    d_preload = jax.grad(absent)(jnp.zeros(()), jaxcal.CompensatorPreloadLaw, "Kc_s0")
+    d_s0 = jax.grad(absent)(jnp.zeros(()), jaxcal.CompensatorLaw, "s0")
+    assert abs(float(d_preload)) > 0.1 and float(d_s0) == 0.0
+    d = jaxcal.tree_to_dict(_pair(compensator=None)[1])
+    d["spring_laws"] = [
+        {"law": "compensator_preload", "joint": "q2", "lc_m": 0.235, "l2_m": 0.6}
+        | {"Kc_N_per_m": 8e4, "Kc_s0_N": 2.4e4}
+    ]
+    tree = jaxcal.tree_from_dict(d)
+    assert jaxcal.tree_to_dict(tree)["spring_laws"] == d["spring_laws"]
+    assert isinstance(tree.laws[0], jaxcal.CompensatorPreloadLaw)
+
+
 def test_compensator_and_tracker_effects_are_the_trees_law_and_frame():
     """A compensator added to a robot without one (parameterised by Kc and Kc·s0) is the
     tree's `compensator` law with s0 = (Kc·s0)/Kc, and a turned tracker frame the

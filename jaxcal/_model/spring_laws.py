@@ -32,6 +32,7 @@ from jaxtyping import Array, ArrayLike, Float
 __all__ = [
     "SpringLaw",
     "CompensatorLaw",
+    "CompensatorPreloadLaw",
     "JointHardening",
     "JointBacklash",
     "SPRING_LAWS",
@@ -106,6 +107,36 @@ class CompensatorLaw(SpringLaw):
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
         s = compensator_length(self.lc, self.l2, phi)
         return 0.5 * self.Kc * (s - self.s0) ** 2
+
+
+class CompensatorPreloadLaw(SpringLaw):
+    """The spring gravity compensator of `CompensatorLaw` with its preload `Kc·s0` (N,
+    the spring's force at zero length) as the parameter in place of `s0`: its potential
+    `½·Kc·s² − (Kc·s0)·s` (less the constant `½·Kc·s0²`, which moves nothing) is linear
+    in `(Kc, Kc·s0)`, so a fit can start from an absent spring (both 0), where `s0`
+    alone has no effect. The FANUC form's added compensator (`CompensatorSpring`) is
+    this law."""
+
+    lc: Float[Array, ""]
+    l2: Float[Array, ""]
+    Kc: Float[Array, ""]
+    Kc_s0: Float[Array, ""]
+    joint: int = eqx.field(static=True)
+    keys: ClassVar[tuple[tuple[str, str, float], ...]] = (
+        ("lc_m", "lc", 1.0),
+        ("l2_m", "l2", 1.0),
+        ("Kc_N_per_m", "Kc", 1.0),
+        ("Kc_s0_N", "Kc_s0", 1.0),
+    )
+    law: ClassVar[str] = "compensator_preload"
+    geometry: ClassVar[tuple[str, ...]] = ("lc", "l2")
+    # As `CompensatorLaw`'s: a spring that balances 20 N·m across lever arms of 0.1 and
+    # 0.2 m, with a preload of ten times its stiffness per metre.
+    typical: ClassVar[dict[str, float]] = {"Kc": 1e3, "Kc_s0": 1e1}
+
+    def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
+        s = compensator_length(self.lc, self.l2, phi)
+        return 0.5 * self.Kc * s**2 - self.Kc_s0 * s
 
 
 #: Reference joint deflection (rad) of `JointHardening`: 1 mrad, a typical deflection
@@ -219,6 +250,7 @@ def _linear_part_jvp(primals, tangents):
 
 SPRING_LAWS: dict[str, type[SpringLaw]] = {
     "compensator": CompensatorLaw,
+    "compensator_preload": CompensatorPreloadLaw,
     "joint_hardening": JointHardening,
     "backlash": JointBacklash,
 }

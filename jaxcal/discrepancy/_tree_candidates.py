@@ -22,7 +22,12 @@ from .._identification.parameter_groups import (
     default_groups,
     parameter_table,
 )
-from .._model.spring_laws import CompensatorLaw, JointBacklash, JointHardening
+from .._model.spring_laws import (
+    CompensatorLaw,
+    CompensatorPreloadLaw,
+    JointBacklash,
+    JointHardening,
+)
 from .._model.tree import TreeRobot
 from ._tree_report import TreeCandidate
 
@@ -138,7 +143,9 @@ def candidate_robot(
     sliding = [j for j in compensators if robot.joint_prismatic[robot.joint_names.index(j)]]
     if sliding:
         raise ValueError(f"compensators: joint(s) {sliding} are prismatic, a compensator turns")
-    have = {law.joint for law in robot.laws if isinstance(law, CompensatorLaw)}
+    have = {
+        law.joint for law in robot.laws if isinstance(law, (CompensatorLaw, CompensatorPreloadLaw))
+    }
     twice = [j for j in compensators if robot.joint_names.index(j) in have]
     if twice:
         raise ValueError(f"compensators: joint(s) {twice} have a compensator in the robot file")
