@@ -74,10 +74,12 @@ def main() -> None:
         again = jaxcal.discover(nominal, both)
         win = again.best == args.case and again.effect != "none" and not again.ambiguous_with
         wins += win
-        rival = {c.label: c.delta_bic for c in again.candidates}.get(d.b, float("nan"))
+        # The pair's other member, whichever of the two comes first now.
+        other = d.a if again.best == d.b else d.b
+        rival = {c.label: c.delta_bic for c in again.candidates}.get(other, float("nan"))
         print(
             f"seed {s}: {said} or {d.b}; T {d.t_before:.1f} -> {d.t_after:.1f} with {len(d.rows)}"
-            f" rows; then {again.best} ΔBIC {again.delta_bic:.1f}, {d.b} {rival:.1f}"
+            f" rows; then {again.best} ΔBIC {again.delta_bic:.1f}, {other} {rival:.1f}"
             f" -> {'won' if win else 'lost'}"
         )
     print(
