@@ -10,9 +10,11 @@
 - absolute measurements determine the compensator that deflections cannot, and with the
   process wrench in the file (load columns) the springs the robot's weight leaves alone;
 - lateral springs after or before the joint, mass and spring-law parameters;
-- the FANUC form's tool compliance is the springs of the tree's flange element (to
-  second order in the tool's rotation), its joint nonlinearity the `joint_hardening`
-  law, and the tree's discovery names a tool compliance at the flange.
+- the FANUC form's tool compliance and arms' bending are springs of the tree's fixed
+  elements (to second order in the rotation), its joint nonlinearity and lost motion
+  the `joint_hardening` and `backlash` laws, an added compensator the
+  `compensator_preload` law, and the tree's discovery names a tool compliance at the
+  flange.
 """
 
 from __future__ import annotations
@@ -180,32 +182,30 @@ def test_springs_of_fixed_elements_are_the_fanuc_forms_bending_effects(fanuc, ef
     assert 80 < gap / gap10 < 125
 
 
-@pytest.mark.parametrize("joint, c", [(2, 0.05), (3, 0.3), (5, 0.05)])
-def test_joint_hardening_is_the_fanuc_forms_joint_nonlinearity(fanuc, joint, c):
+@pytest.mark.parametrize(
+    "effect, joint, value",
+    [
+        (jaxcal.JointNonlinearity, 2, 0.05),
+        (jaxcal.JointNonlinearity, 3, 0.3),
+        (jaxcal.JointNonlinearity, 5, 0.05),
+        (jaxcal.Backlash, 1, 50.0),
+        (jaxcal.Backlash, 2, 20.0),
+        (jaxcal.Backlash, 3, 200.0),
+        (jaxcal.Backlash, 5, 100.0),
+    ],
+)
+def test_joint_laws_are_the_fanuc_forms_joint_effects(fanuc, effect, joint, value):
     """The FANUC form's joint nonlinearity `¼·c·θ⁴/(κ·θref²)` is the tree's
-    `joint_hardening` law `¼·h·(θ/θref)⁴` with `h = c·θref²/κ` (`as_tree`): the same
-    deflections to the solvers' tolerance (joint 2 with its compensator, joint 3 behind
-    the parallelogram, joint 5 deflected 2 mrad, where only the accelerated solver that
-    `as_tree` then chooses converges)."""
+    `joint_hardening` law `¼·h·(θ/θref)⁴` with `h = c·θref²/κ`, and its lost motion (an
+    energy of the joint's whole deflection, which its Newton minimises) the tree's
+    `backlash` law `θ = κτ + b·tanh(κτ/w)` (`as_tree`): the same deflections to the
+    solvers' tolerance, under a force and a moment. Joint 1 has no gravity torque (in the
+    middle of its band), joint 2 its compensator, joint 3 sits behind the parallelogram,
+    joint 5 is deflected 2 mrad, where a hardening leaves only the accelerated solver
+    that `as_tree` then chooses converging."""
     robot, _ = fanuc
     q, f, m = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED), jnp.asarray(M_LOADED)
-    r = _with(robot, jaxcal.JointNonlinearity(joint, jnp.asarray(c)))
-    dp_tree, ok = jaxcal.tree_deflection(jaxcal.as_tree(r), q, f, m)
-    dp = jaxcal.deflection(r, q, f, m)
-    assert bool(ok) and float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 1e-7
-    np.testing.assert_allclose(dp_tree, dp, rtol=0, atol=1e-12)
-
-
-@pytest.mark.parametrize("joint, b", [(1, 50.0), (2, 20.0), (3, 200.0), (5, 100.0)])
-def test_backlash_is_the_trees_backlash_law(fanuc, joint, b):
-    """The FANUC form's lost motion, an energy of the joint's whole deflection that its
-    Newton minimises, is the tree's `backlash` law `θ = κτ + b·tanh(κτ/w)` (`as_tree`):
-    the same deflections to the solvers' tolerance, at joint 1 (no gravity torque: in
-    the middle of its band), joint 2 (with the compensator), joint 3 (behind the
-    parallelogram) and joint 5, under a force and a moment."""
-    robot, _ = fanuc
-    q, f, m = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED), jnp.asarray(M_LOADED)
-    r = _with(robot, jaxcal.Backlash(joint, jnp.asarray(b)))
+    r = _with(robot, effect(joint, jnp.asarray(value)))
     dp_tree, ok = jaxcal.tree_deflection(jaxcal.as_tree(r), q, f, m)
     dp = jaxcal.deflection(r, q, f, m)
     assert bool(ok) and float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 5e-8
