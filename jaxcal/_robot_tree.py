@@ -51,8 +51,9 @@ def as_tree(robot: Robot) -> TreeRobot:
     springs of `link2` (at the joint-2 axis) and `link3` (at the elbow), x along the
     arm, about their z and y; `JointNonlinearity` a `joint_hardening` law,
     `h = c·θref²/k`; `Backlash` a `backlash` law of the same half-width;
-    `CompensatorSpring` a `compensator_preload` law (the same parameters); `TrackerRotation` the
-    measurement frame's rotation. Raises a `ValueError` naming any other effect."""
+    `CompensatorSpring` a `compensator_preload` law (the same parameters, Kc and Kc·s0);
+    `TrackerRotation` the measurement frame's rotation. Raises a `ValueError` naming
+    any other effect."""
     # The structure from the file form, with numbers that only have to be valid there:
     # every one of them is replaced below by the robot's own (traced) value.
     stand_in = eqx.tree_at(

@@ -131,7 +131,7 @@ class CompensatorPreloadLaw(SpringLaw):
     law: ClassVar[str] = "compensator_preload"
     geometry: ClassVar[tuple[str, ...]] = ("lc", "l2")
     # As `CompensatorLaw`'s: a spring that balances 20 N·m across lever arms of 0.1 and
-    # 0.2 m, with a preload of ten times its stiffness per metre.
+    # 0.2 m, and its Kc times that law's typical s0 of 1 cm.
     typical: ClassVar[dict[str, float]] = {"Kc": 1e3, "Kc_s0": 1e1}
 
     def potential(self, phi: Float[Array, ""]) -> Float[Array, ""]:
