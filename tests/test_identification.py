@@ -196,8 +196,10 @@ def test_linear_method_is_biased_on_full_model(robot, example, example_fit):
 
 
 def test_predictor_jacobian_matches_implicit_adjoint_and_fd(robot, example):
-    # The fit differentiates the equilibrium by one Newton step on the stopped root;
-    # it must equal optimistix's implicit adjoint (observation_physical) and central FD.
+    # The fit's model is the robot's tree, its equilibrium differentiated by the implicit
+    # function theorem: its values must equal the FANUC form's own Newton solution, its
+    # derivatives optimistix's implicit adjoint of it (observation_physical) and
+    # central differences.
     data, _ = example
     sub = data.subset(slice(0, 6))
     predictor = full_model_predictor(robot, sub)
@@ -213,6 +215,7 @@ def test_predictor_jacobian_matches_implicit_adjoint_and_fd(robot, example):
     V = jnp.concatenate([jnp.eye(n), jnp.zeros((2 * len(cols), n))])
     values, tangents = jvp(P, V)
     J = jnp.moveaxis(tangents[:n], 0, -1)
+    np.testing.assert_allclose(values[0], jaxcal.model_deflections(robot, sub), rtol=0, atol=1e-12)
     ref = jaxcal.observation_physical(robot, sub)
     np.testing.assert_allclose(J, ref, rtol=1e-7, atol=1e-12 * float(jnp.abs(ref).max()))
     plus, minus = values[n : n + len(cols)], values[n + len(cols) :]

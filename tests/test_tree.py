@@ -240,7 +240,23 @@ def test_a_balance_that_is_no_minimum_is_not_an_equilibrium():
     s = np.sqrt(np.asarray(tree.compliance)[np.asarray(tree.elastic)].reshape(-1)[springs])
     S = np.asarray(A) * s[None, :] / s[:, None]  # I + κ^½ ∇²V κ^½
     assert np.linalg.eigvalsh(0.5 * (S + S.T)).min() < 0  # ... at a saddle,
-    assert not bool(converged)  # which is no equilibrium
+    assert not bool(converged)  # which is no equilibrium,
+    # unless the caller asks for the balance alone (a fit's evaluations).
+    assert bool(jaxcal.tree_equilibrium(tree, q, force=f, check_stability=False).converged)
+
+
+def test_small_trees_compose_their_frames_as_the_scan_does(monkeypatch):
+    """A tree of at most `UNROLLED_ELEMENTS` elements (the FANUC's 11) composes its frames
+    in a written-out chain, a larger one (Agile Justin's 27) in a scan: the same frames
+    to round-off, at a deflected pose."""
+    tree = jaxcal.as_tree(jaxcal.load_robot())
+    q = jnp.asarray([0.3, -0.2, 0.4, 0.5, -0.6, 0.7])
+    phi = jnp.full((len(tree.elastic), 3), 1e-3)
+    chain = jaxcal.element_frames(tree, q, phi)
+    monkeypatch.setattr("jaxcal._model.tree_kinematics.UNROLLED_ELEMENTS", 0)
+    scan = jaxcal.element_frames(tree, q, phi)
+    assert len(tree.names) <= 12
+    np.testing.assert_allclose(chain, scan, rtol=0, atol=1e-15)
 
 
 def test_cartesian_compliance_is_the_full_models_response_to_a_small_wrench(justin, data):

@@ -305,7 +305,7 @@ def nonlinear_fit(
     solver = levenberg_marquardt(rtol, atol, chi2_tol)
     # optimistix traces the residual twice (shape inference under `eval_shape`, which
     # runs in an empty abstract-mesh context, and the solve itself). Under one context
-    # the model's jitted inner pieces (`batch_roots`) are traced once and reused.
+    # the model's jitted inner pieces (the equilibrium) are traced once and reused.
     with jax.sharding.use_abstract_mesh(_NO_MESH):
         sol = optx.least_squares(
             fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False, options={"jac": _JAC}

@@ -10,7 +10,11 @@ Newton; derivatives with respect to the robot parameters come from the implicit
 function theorem (optimistix `ImplicitAdjoint`), never by unrolling the iterations.
 
 A measurement is `Δp = pT(q, θ*(q, F)) − pT(q, θ*(q, 0))`: loaded minus unloaded at the
-same q (spec: "What a calibration experiment measures").
+same q (spec: "What a calibration experiment measures"). The fits' model of it
+(`measured_deflections`: the nonlinear identification, Monte-Carlo and the discrepancy
+workflow) is computed on the robot's tree (`as_tree`), the one model of every robot;
+this module's own Newton serves the single-configuration functions and the design's
+observation matrices.
 """
 
 from __future__ import annotations
@@ -24,12 +28,14 @@ from jaxtyping import Array, Bool, Float, Int
 from .._linalg.dense import is_positive_definite, lu_factor, lu_solve
 from .._linalg.solvers import lu_solver
 from .._robot import G, Robot
+from .._robot_tree import as_tree
 from .._solution import RESULTS, result_of
 from .compensator import spring_energy as _compensator_potential
 from .effects import collect_effects, observe_effects
 from .kinematics import forward, mass_positions
 from .rotations import angular_jacobian
-from .tree_statics import stop_gradients
+from .tree_kinematics import marker_positions
+from .tree_statics import stop_gradients, tree_equilibrium
 
 __all__ = [
     "Equilibrium",
@@ -137,7 +143,7 @@ def dof_scale(robot: Robot, q) -> Float[Array, " ndof"]:
 # shapes (loaded and unloaded), and observation matrices, fits and designs trace it
 # again under their derivatives; one trace serves them all.
 @eqx.filter_jit
-def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> Equilibrium:
+def solve_state(robot, q, force, moment, *, check_stability: bool) -> Equilibrium:
     q = jnp.asarray(q)
     dtype = jnp.result_type(q, robot.compliance)
     q = q.astype(dtype)
@@ -151,13 +157,10 @@ def solve_state(robot, q, force, moment, *, check_stability: bool, x0=None) -> E
     # LU from `_linalg.solvers` (by default in plain jnp, not LAPACK: this solve runs
     # vmapped, and batched LAPACK kernels can deadlock XLA's CPU thread pool).
     solver = optx.Newton(rtol=rtol, atol=atol, linear_solver=lu_solver(), cauchy_termination=True)
-    # A warm start (e.g. the equilibrium at nearby angles) saves Newton steps; the
-    # implicit adjoint makes the derivatives independent of it.
-    x0 = jnp.zeros(scale.shape, dtype) if x0 is None else jax.lax.stop_gradient(x0).astype(dtype)
     sol = optx.root_find(
         equilibrium_residual,
         solver,
-        x0,
+        jnp.zeros(scale.shape, dtype),
         args=(robot, q, force, moment, scale),
         max_steps=_MAX_STEPS,
         adjoint=optx.ImplicitAdjoint(linear_solver=lu_solver()),
@@ -261,27 +264,6 @@ def deflection(
     return eqx.error_if(dp, ~ok, "static equilibrium did not converge or is not stable")
 
 
-@jax.jit
-def batch_roots(
-    robot: Robot,
-    q: Float[Array, "n 6"],
-    force: Float[Array, "n 3"],
-    moment: Float[Array, "n 3"] | None,
-    x0: Float[Array, "n ndof"] | None = None,
-) -> tuple[Float[Array, "n ndof"], Bool[Array, " n"]]:
-    """Equilibrium roots `x` and convergence flags of `n` configurations (no
-    derivatives: differentiate with `implicit_step`); `x0` warm-starts Newton."""
-    # A jitted batch of equilibrium roots (no derivatives): every trace of a model that
-    # calls it with the same shapes reuses one cached jaxpr, instead of re-tracing the
-    # Newton loop under each transformation (the LM residual and its JVP rule each
-    # evaluate the model). Tracing the loop is most of a fit's time once compiled.
-    solve = lambda a, b, c, x: solve_state(robot, a, b, c, check_stability=False, x0=x)
-    eq = jax.vmap(solve, in_axes=(0, 0, None if moment is None else 0, None if x0 is None else 0))(
-        q, force, moment, x0
-    )
-    return eq.x, eq.converged
-
-
 def implicit_step(
     robot: Robot,
     q,
@@ -294,9 +276,9 @@ def implicit_step(
     frozen_hessian: bool = False,
 ):
     """The root `x` of eq. (17) as a differentiable function: `x − H⁻¹ g(x)`; the one
-    implicit-function derivative of jaxcal (identify, discover, design, compensate).
+    implicit-function derivative of the FANUC form's design observation.
 
-    At a root (from `batch_roots` or `solve_state` on stop-gradient inputs) the value is `x`
+    At a root (from `solve_state` on stop-gradient inputs) the value is `x`
     and the first derivative with respect to the robot's parameters, `q`, the force and
     the moment is the implicit-function one, `−H⁻¹ ∂g`. Unlike the optimistix adjoint
     its linear solve never raises, so a failed equilibrium gives `ok = False`, not an
@@ -344,33 +326,29 @@ def measured_deflections(
     moment_all: Float[Array, "m 3"] | None,
     inverse: Int[Array, " n"],
 ) -> tuple[Float[Array, "n 3"], Bool[Array, " n"]]:
-    """The measured quantity (loaded minus unloaded tool point, then the observation
-    effects) of `n` rows of a design with the full model, differentiable in `robot` by
-    forward mode, never raising.
+    """The measured quantity (loaded minus unloaded tool point, in the measurement
+    frame) of `n` rows of a design with the full model, differentiable in `robot` by
+    forward mode, never raising: computed on the robot's tree (`as_tree`), whose
+    equilibrium is differentiated by the implicit function theorem.
 
     `q_all` holds the `n` rows' configurations followed by their `u` distinct
     configurations (`inverse` (n,) maps a row to its one), `force_all` / `moment_all` the
-    rows' loads followed by zeros. Every equilibrium goes through *one* vmapped Newton
-    solve (`batch_roots`): one copy of the equilibrium program in a compiled fit instead
-    of two. It starts from θ = 0, not from a fit's previous roots: the slowest solve of
-    a batch saves one Newton step that way, and the extra solve costs more.
+    rows' loads followed by zeros: every equilibrium goes through *one* vmapped solve,
+    one copy of the equilibrium program in a compiled fit instead of two.
 
     Returns `(dp (n, 3) m, ok (n,))`; a row whose equilibria failed is
     `FAILED_DEFLECTION` in `dp` and `False` in `ok`. `with_unloaded` builds the inputs.
     """
     n = inverse.shape[0]
-    xs, conv = batch_roots(stop_gradients(robot), q_all, force_all, moment_all)
-    # A tool moment makes the Hessian non-symmetric (no potential of a finite rotation).
-    symmetric = moment_all is None
+    tree = as_tree(robot)
 
-    def tool(q, f, m, x, c):
-        x, ok = implicit_step(robot, q, f, m, x, c, symmetric=symmetric)
-        return tool_pose(robot, q, x)[0], ok
+    def tool(q, f, m):
+        eq = tree_equilibrium(tree, q, force=f, moment=m, check_stability=False)
+        return marker_positions(tree, q, eq.phi)[0], eq.converged
 
     m_axis = None if moment_all is None else 0
-    pt, oks = jax.vmap(tool, in_axes=(0, 0, m_axis, 0, 0))(q_all, force_all, moment_all, xs, conv)
+    pt, oks = jax.vmap(tool, in_axes=(0, 0, m_axis))(q_all, force_all, moment_all)
     dp = pt[:n] - pt[n:][inverse]
-    dp = jax.vmap(lambda q, f, d: observe_effects(robot, q, f, d))(q_all[:n], force_all[:n], dp)
     ok = oks[:n] & oks[n:][inverse] & jnp.all(jnp.isfinite(dp), axis=1)
     return jnp.where(ok[:, None], dp, FAILED_DEFLECTION), ok
 

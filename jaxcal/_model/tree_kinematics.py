@@ -34,6 +34,11 @@ __all__ = [
 ]
 
 
+#: Trees of at most this many elements compose their frames in a written-out chain,
+#: larger ones in a scan (whose program does not grow with the tree).
+UNROLLED_ELEMENTS = 12
+
+
 def _mm(A: Array, B: Array) -> Array:
     return A @ B
 
@@ -116,6 +121,20 @@ def element_poses(
         bool(has.any()),
         any(robot.sliding),
     )
+
+    if e <= UNROLLED_ELEMENTS:
+        # A small tree's chain written out: its few 3×3 products run as one fused
+        # program instead of a loop's steps of dynamic gathers and scatters.
+        Rl, tl = local
+        Rc: list[Array] = []
+        tc: list[Array] = []
+        for i, p in enumerate(robot.parents):
+            R, t = Rl[i], tl[i]
+            if p >= 0:
+                R, t = _mm(Rc[p], R), tc[p] + _mv(Rc[p], t)
+            Rc.append(R)
+            tc.append(t)
+        return jnp.stack(Rc), jnp.stack(tc)
 
     def body(carry, x):
         Rs, ts = carry

@@ -257,12 +257,15 @@ def tree_equilibrium(
     at: int | str = 0,
     max_steps: int = 32,
     derivative_rtol: float = DERIVATIVE_RTOL,
+    check_stability: bool = True,
 ) -> TreeEquilibrium:
     """The spring deflections at which gravity, the spring laws, an optional external
     wrench (`force` N and `moment` N·m in the base frame, applied at marker `at`) and
     the springs balance, at commanded angles `q` (rad). Differentiable in every array
     field of `robot` by the implicit function theorem, to `derivative_rtol` relative
-    (see `DERIVATIVE_RTOL`); never raises for values (check `converged`)."""
+    (see `DERIVATIVE_RTOL`); never raises for values (check `converged`).
+    `check_stability=False` skips the accelerated solver's check that the balance is a
+    minimum (a fit's evaluations near a converged model, as the FANUC form's did)."""
     at = check_load(robot, q, force, moment, at)
     phi = _fixed_point(
         robot, q, force, moment, at=at, max_steps=max_steps, derivative_rtol=derivative_rtol
@@ -272,7 +275,7 @@ def tree_equilibrium(
     tol = 10.0 * _tolerance(q.dtype)
     change = jnp.max(jnp.abs(spring_residual(phi, (robot, q, force, moment, at))))
     ok = (change <= tol * (1.0 + jnp.max(jnp.abs(phi)))) & jnp.all(jnp.isfinite(phi))
-    if robot.equilibrium_solver == "accelerated":
+    if robot.equilibrium_solver == "accelerated" and check_stability:
         # The plain iteration cannot settle on a saddle of the potential (there the map
         # expands: an eigenvalue of `κ∇²V` below −1), the accelerated one can: a
         # balance that is no minimum is no equilibrium a robot holds.
