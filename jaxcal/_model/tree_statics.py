@@ -265,7 +265,8 @@ def tree_equilibrium(
     field of `robot` by the implicit function theorem, to `derivative_rtol` relative
     (see `DERIVATIVE_RTOL`); never raises for values (check `converged`).
     `check_stability=False` skips the accelerated solver's check that the balance is a
-    minimum (a fit's evaluations near a converged model, as the FANUC form's did)."""
+    minimum (one forward pass per spring): for a fit's many evaluations, which take the
+    balance alone."""
     at = check_load(robot, q, force, moment, at)
     phi = _fixed_point(
         robot, q, force, moment, at=at, max_steps=max_steps, derivative_rtol=derivative_rtol
