@@ -272,7 +272,6 @@ def implicit_step(
     x,
     converged,
     *,
-    symmetric: bool = True,
     frozen_hessian: bool = False,
 ):
     """The root `x` of eq. (17) as a differentiable function: `x − H⁻¹ g(x)`; the one
@@ -282,8 +281,8 @@ def implicit_step(
     and the first derivative with respect to the robot's parameters, `q`, the force and
     the moment is the implicit-function one, `−H⁻¹ ∂g`. Unlike the optimistix adjoint
     its linear solve never raises, so a failed equilibrium gives `ok = False`, not an
-    exception (essential under `vmap`). `symmetric` symmetrises `H` (exact for a
-    potential force; a tool moment makes `H` non-symmetric: pass `False`).
+    exception (essential under `vmap`). Without a tool moment `H` is symmetrised
+    (exact for a potential force; a moment makes `H` non-symmetric).
     `frozen_hessian` holds `H` constant: the first derivative is unchanged (`g = 0` at
     the root), and a caller that differentiates the result's derivative again (the
     design optimiser's q-gradient of a sensitivity) does not trace third derivatives of
@@ -294,7 +293,7 @@ def implicit_step(
     ones = jnp.ones_like(x)
     H = jax.jacfwd(lambda y: equilibrium_residual(y, (r0, q, force, moment, ones)))(x)
     g = equilibrium_residual(x, (robot, q, force, moment, ones))
-    if symmetric:
+    if moment is None:
         H = 0.5 * (H + H.T)
     if frozen_hessian:
         H = jax.lax.stop_gradient(H)
