@@ -12,7 +12,7 @@
 
 The two answers are compared (max |Δqc|), and the residual of jaxcal's angles is checked
 by its own verification solve. jaxcal compensates the FANUC on its tree (`as_tree`, the
-one general model); the baseline's residual is the quasi-serial template's equilibrium.
+one general model); so does the baseline's residual (`jaxcal.equilibrium`).
 
 Run: `python benchmarks/bench_compensation.py [--n 1000] [--n-baseline 100] [--repeat 3]`.
 """

@@ -114,7 +114,6 @@ from ._model.equilibrium import (
     total_potential as total_potential,
 )
 from ._model.kinematics import (
-    EXTRA_SITES as EXTRA_SITES,
     Pose as Pose,
     forward as forward,
     jacobian_theta as jacobian_theta,

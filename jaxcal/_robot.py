@@ -7,10 +7,7 @@ key names (`_deg`, `_m`, `_urad_per_Nm`, ...), converted at the boundary.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import equinox as eqx
-import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 __all__ = ["AbstractEffect", "Robot", "Experiment", "BODIES", "GEOMETRY_KEYS", "URAD", "G"]
@@ -23,40 +20,11 @@ G = 9.80665  # m/s², standard gravity (spec: robot.md)
 
 
 class AbstractEffect(eqx.Module):
-    """Base class of a model extension. Override what the effect needs.
-
-    `n_dof` (class variable): number of extra deflection variables ξ (rad).
-    """
-
-    n_dof: ClassVar[int] = 0
-
-    def sites(self, robot: Robot, xi: Float[Array, " n"]) -> dict[str, Float[Array, 3]]:
-        """Rotation vectors (rad) at kinematic sites, from this effect's ξ."""
-        return {}
-
-    def energy(
-        self, robot: Robot, q: Float[Array, 6], theta: Float[Array, 6], xi: Float[Array, " n"]
-    ) -> Float[Array, ""]:
-        """Extra potential energy (J), e.g. the springs of ξ."""
-        return jnp.zeros((), theta.dtype)
-
-    def joint_energy(
-        self, robot: Robot, theta: Float[Array, 6], energy: Float[Array, 6]
-    ) -> Float[Array, 6]:
-        """Per-joint spring energies (J) given those so far (default ½θ²/k): return them
-        modified for joints whose spring law this effect changes."""
-        return energy
-
-    def observe(
-        self, robot: Robot, q: Float[Array, 6], force: Float[Array, 3], dp: Float[Array, 3]
-    ) -> Float[Array, 3]:
-        """The measured deflection (m) given the model's `dp` (m, base frame): an
-        observation-level effect (e.g. a rotated tracker frame). Default: unchanged."""
-        return dp
-
-    def dof_scale(self, robot: Robot) -> Float[Array, " n"]:
-        """A compliance (rad/(N·m)) per ξ, to scale Newton's residual; rough is fine."""
-        return jnp.full((self.n_dof,), 1e-6)
+    """Base class of a model effect of the discrepancy workflow (`jaxcal.ToolCompliance`,
+    `jaxcal.LinkBending`, ...): its array fields are its parameters. What an effect is
+    in the model is its form on the robot's tree (springs of a fixed element, a spring
+    law, the measurement frame), given by `jaxcal.as_tree`; an effect without one is
+    named there."""
 
 
 class Experiment(eqx.Module):

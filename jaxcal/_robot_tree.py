@@ -4,14 +4,12 @@ The quasi-serial form is written as a tree by `_model/quasi_serial.py` (a robot 
 a tree file). `as_tree` does the same for a `Robot` value, with its structure from that
 file form and every number from the robot's array fields, so that derivatives and
 batches over a `Robot` (a calibration's parameters, a simulation's robots as built) pass
-through to the tree: the FANUC-form capabilities computed on the tree take a `Robot` as
-they always did.
+through to the tree: every capability of a FANUC-form `Robot` is computed on it.
 
-The discrepancy workflow's model effects (`Robot.effects`) become what the tree writes
-them with: springs of its fixed elements, spring laws, the measurement frame. A tree
-turns an element by `Rz·Rx·Ry` of its springs' deflections where the FANUC form turns
-a site by `exp(ξ)`; the two agree to first order in the rotation (its second order is
-the gap, a fraction of a percent of what the effect moves at a few mrad).
+The discrepancy workflow's model effects (`Robot.effects`) are what the tree writes them
+with: springs of its fixed elements, spring laws, the measurement frame. The springs of
+a FANUC-form robot are one vector (`spring_order`): the joint springs θ1..θ6, then the
+springs its effects add.
 """
 
 from __future__ import annotations
@@ -19,7 +17,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
+from jaxtyping import Array, Float
 
 from ._model.candidates import (
     THETA_REF as EFFECT_THETA_REF,
@@ -38,7 +36,7 @@ from ._model.tree_files import tree_from_dict
 from ._robot import URAD, Robot
 from ._robot_file import robot_to_dict
 
-__all__ = ["as_tree"]
+__all__ = ["as_tree", "spring_order", "springs_of"]
 
 
 def as_tree(robot: Robot) -> TreeRobot:
@@ -135,6 +133,25 @@ def as_tree(robot: Robot) -> TreeRobot:
             world,
         ),
     )
+
+
+def spring_order(tree: TreeRobot) -> np.ndarray:
+    """The entries of the tree's flattened deflections `φ.reshape(-1)` that make up a
+    FANUC-form robot's vector `x`: each active joint's drive spring in joint order, then
+    the tree's other springs in element order."""
+    row = {e: i for i, e in enumerate(tree.elastic)}
+    drives = [3 * row[tree.drive[j]] for j in range(tree.n_joints)]
+    rest = [int(i) for i in np.flatnonzero(tree.spring_mask()) if int(i) not in drives]
+    return np.asarray(drives + rest, dtype=int)
+
+
+def springs_of(tree: TreeRobot, x: Float[Array, " ndof"]) -> Float[Array, "r 3"]:
+    """The tree's deflections `φ` (r, 3) of the vector `x` (`spring_order`'s entries)."""
+    order = spring_order(tree)
+    if jnp.shape(x) != (order.size,):
+        raise ValueError(f"x must have shape ({order.size},), got {jnp.shape(x)}")
+    full = jnp.zeros(3 * len(tree.elastic), x.dtype).at[jnp.asarray(order)].set(x)
+    return full.reshape(-1, 3)
 
 
 def _spring_site(effect) -> tuple[str, tuple[str, ...], Array] | None:

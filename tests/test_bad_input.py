@@ -90,7 +90,8 @@ def test_equilibrium_failure_is_a_message_and_nothing_is_written(example, tmp_pa
 
 def test_failure_does_not_clobber_an_existing_output(example, tmp_path, capsys):
     d = jaxcal.robot_to_dict(jaxcal.load_robot())
-    d["joint_compliance_urad_per_Nm"] = [c * 1000 for c in d["joint_compliance_urad_per_Nm"]]
+    # 1e5 times the preset's springs: no stable equilibrium at any row.
+    d["joint_compliance_urad_per_Nm"] = [c * 1e5 for c in d["joint_compliance_urad_per_Nm"]]
     (tmp_path / "soft.json").write_text(json.dumps(d))
     out = tmp_path / "out.csv"
     out.write_text("previous results\n")

@@ -15,6 +15,7 @@ import json
 import math
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -63,71 +64,78 @@ def study(robot, example):
     return STUDY.run_study(robot, example, cases=STUDY.TEST_CASES, seeds=STUDY.TEST_SEEDS)
 
 
-# -- candidate physics (cheap, no equilibrium) ------------------------------------------
+# -- candidate physics (cheap, no equilibrium): each effect's form on the robot's tree --
 
 
-def _torque(effect, robot, j, theta_j):
-    """Spring torque of joint j (N·m): d/dθ of the nominal ½θ²/k plus the effect."""
-
-    def energy(t):
-        theta = jnp.zeros(6).at[j - 1].set(t)
-        base = 0.5 * t**2 / robot.compliance[j - 1]
-        return base + effect.energy(robot, jnp.zeros(6), theta, jnp.zeros(0))
-
-    return jax.grad(energy)(theta_j)
+def _law(robot, effect, name):
+    """The effect's spring law on the robot's tree (`as_tree`) and its joint (1-based)."""
+    tree = jaxcal.as_tree(eqx.tree_at(lambda r: r.effects, robot, (effect,)))
+    (law,) = (x for x in tree.laws if x.law == name)
+    return law, tree.names[tree.drive[law.joint]]
 
 
 def test_backlash_is_lost_motion(robot):
     b = 50.0  # µrad
-    eff = Backlash(1, jnp.asarray(b))
-    k = robot.compliance[0]
-    for t in (1e-3, -2e-3, 3e-3):
-        # Far outside the band (|θ|/w ≥ 10, w = 2·sqrt(b² + w0²) ≈ 100 µrad) the spring
-        # sees θ − b·sign θ: tanh and sech² differ from 1 and 0 by < 1e-8.
-        want = (t - math.copysign(b * URAD, t)) / k
-        assert float(_torque(eff, robot, 1, jnp.asarray(t))) == pytest.approx(float(want), rel=1e-6)
-    # Convex everywhere (stable Newton): the torque is increasing through the band.
-    ts = jnp.linspace(-3 * b * URAD, 3 * b * URAD, 201)
-    tau = jax.vmap(lambda t: _torque(eff, robot, 1, t))(ts)
-    assert bool(jnp.all(jnp.diff(tau) > 0))
+    law, joint = _law(robot, Backlash(1, jnp.asarray(b)), "backlash")
+    assert joint == "J1"
+    k = float(robot.compliance[0])
+    for tau in (1e-3 / k, -2e-3 / k, 3e-3 / k):
+        # Far outside the band (|κτ|/w ≥ 10, w = 2·sqrt(b² + w0²) ≈ 100 µrad) the joint
+        # deflects by κτ + b·sign τ: tanh differs from ±1 by < 1e-8.
+        want = k * tau + math.copysign(b * URAD, tau)
+        assert k * tau + float(law.extra(jnp.asarray(k * tau))) == pytest.approx(want, rel=1e-6)
+    # The deflection grows with the torque through the band (slope 1 to 1.5 in κτ).
+    x = jnp.linspace(-3 * b * URAD, 3 * b * URAD, 201)
+    slope = jnp.diff(x + jax.vmap(law.extra)(x)) / jnp.diff(x)
+    assert bool(jnp.all(slope > 1.0 - 1e-9)) and bool(jnp.all(slope < 1.5 + 1e-9))
     # Absent at b = 0.
-    zero = Backlash(1, jnp.asarray(0.0))
-    assert float(zero.energy(robot, jnp.zeros(6), jnp.full(6, 1e-3), jnp.zeros(0))) == 0.0
+    zero, _ = _law(robot, Backlash(1, jnp.asarray(0.0)), "backlash")
+    assert float(zero.extra(jnp.asarray(1e-3))) == 0.0
 
 
 def test_joint_nonlinearity_torque_law(robot):
+    """The spring's torque θ/k·(1 + c·θ²/θref²): the joint spring plus the tree's
+    `joint_hardening` law."""
     c = 0.05
-    eff = JointNonlinearity(3, jnp.asarray(c))
+    law, joint = _law(robot, JointNonlinearity(3, jnp.asarray(c)), "joint_hardening")
+    assert joint == "J3"
     k = robot.compliance[2]
     t = 2e-3
     want = t / k * (1 + c * t**2 / THETA_REF**2)
-    assert float(_torque(eff, robot, 3, jnp.asarray(t))) == pytest.approx(float(want), rel=1e-12)
+    tau = t / k + jax.grad(law.potential)(jnp.asarray(t))
+    assert float(tau) == pytest.approx(float(want), rel=1e-12)
 
 
 def test_compensator_spring_matches_core_compensator(robot):
-    # The candidate's (Kc, Kc·s0) spring gives the torque of eq. (9) of the preset's.
+    """The candidate's (Kc, Kc·s0) spring (the tree's `compensator_preload` law) gives the
+    torque of eq. (9) of the preset's compensator."""
     eff = CompensatorSpring(robot.Kc, robot.Kc * robot.s0, float(robot.lc), float(robot.l2c))
+    law, joint = _law(STUDY.no_compensator(robot), eff, "compensator_preload")
+    assert joint == "J2"
     for q2 in (-0.5, 0.1, 0.9):
-        tau = jax.grad(
-            lambda p: eff.energy(robot, jnp.zeros(6).at[1].set(p), jnp.zeros(6), jnp.zeros(0))
-        )(jnp.asarray(q2))
+        tau = jax.grad(law.potential)(jnp.asarray(q2))
         assert float(tau) == pytest.approx(float(jaxcal.compensator_torque(robot, q2)), rel=1e-10)
 
 
 def test_link_bending_and_decoy_sites(robot):
-    eff = LinkBending(3, jnp.asarray(0.1))
-    xi = jnp.array([1e-4, -2e-4])
-    site = eff.sites(robot, xi)
-    assert set(site) == {"link3"}
-    np.testing.assert_array_equal(site["link3"], [0.0, 1e-4, -2e-4])
-    assert float(eff.energy(robot, None, None, xi)) == pytest.approx(
-        0.5 * float(xi @ xi) / ((0.1 + 1e-6) * URAD)
+    """A link's bending is two springs of its compliance about the axes normal to the
+    link (z and y; x along it) at its root; the decoy turns the measurement frame."""
+    tree = jaxcal.as_tree(
+        eqx.tree_at(lambda r: r.effects, robot, (LinkBending(3, jnp.asarray(0.1)),))
     )
+    element = tree.names.index("link3")
+    np.testing.assert_array_equal(
+        tree.spring_mask()[tree.elastic.index(element)], [True, False, True]
+    )
+    kz, _, ky = np.asarray(tree.compliance)[element]  # rad/(N·m), about z, x, y
+    assert kz == ky == pytest.approx(0.1e-6, rel=1e-12)
     with pytest.raises(ValueError, match="joint must be 2 or 3"):
         LinkBending(4, jnp.asarray(0.1))
     rot = TrackerRotation(jnp.array([0.0, 0.0, 1e6 * math.pi / 2]))  # 90° about z, in µrad
-    out = rot.observe(robot, None, None, jnp.array([1.0, 0.0, 0.0]))
-    np.testing.assert_allclose(out, [0.0, 1.0, 0.0], atol=1e-12)
+    q = jnp.asarray([0.3, 0.2, -0.1, 0.4, 0.5, 0.6])
+    turned = jaxcal.as_tree(eqx.tree_at(lambda r: r.effects, robot, (rot,)))
+    p, p_turned = (jaxcal.marker_positions(t, q)[0] for t in (jaxcal.as_tree(robot), turned))
+    np.testing.assert_allclose(p_turned, [-p[1], p[0], p[2]], atol=1e-12)
 
 
 def test_default_candidates_depend_on_robot(robot):

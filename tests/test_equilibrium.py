@@ -111,7 +111,6 @@ def test_equilibrium_is_a_stationary_stable_minimum(robot, rows):
     for load in (F, jnp.zeros_like(F)):
         sol, g, H = _equilibria(robot, q, load)
         assert np.all(np.asarray(sol.converged)) and np.all(np.asarray(sol.stable))
-        assert np.all(np.asarray(sol.steps) <= 12)  # Newton from θ = 0, quadratic
         # Spring torques at equilibrium are θ/k ~ 1e3–1e4 N·m; round-off in the gradient of
         # a ~1e4 J potential is ~1e-11 N·m. The residual must be at round-off level.
         spring = np.abs(np.asarray(sol.theta) / np.asarray(robot.compliance))
@@ -162,7 +161,9 @@ def test_measurement_is_loaded_minus_unloaded(robot, rows):
     tp = jax.vmap(lambda a, b: jaxcal.tool_point(robot, a, b[:6]))
     expected = np.asarray(tp(q, x1) - tp(q, x0))
     dp = np.asarray(_dp(robot, jaxcal.get_parameters(robot), q, F))
-    np.testing.assert_allclose(dp, expected, rtol=0, atol=1e-15)
+    # Round-off: each tool point (~3 m from the base) to 2.2e-16 relative, 7e-16 m, in
+    # two programs that compose the frames in different orders; twice that per difference.
+    np.testing.assert_allclose(dp, expected, rtol=0, atol=3e-15)
     # ... which differs from the deflection relative to the undeflected pose by the
     # gravity sag, millimetres for this arm.
     sag = np.asarray(tp(q, x0) - tp(q, jnp.zeros_like(x0)))
@@ -200,8 +201,9 @@ def test_unstable_robot_is_flagged(robot, rows, floppy):
     good = lambda s: np.asarray(s.converged) & np.asarray(s.stable)  # noqa: E731
     np.testing.assert_array_equal(ok, good(sol) & good(sol0))
     assert not ok.all() and ok.any()
-    # Newton may converge to a saddle: that is reported as unstable, not as a result.
-    assert np.any(np.asarray(sol0.converged) & ~np.asarray(sol0.stable))
+    # The accelerated fixed point may settle on a saddle: that is reported as unstable,
+    # not as a result.
+    assert np.any(np.asarray(sol.converged) & ~np.asarray(sol.stable))
     # The same outcomes in the RESULTS vocabulary.
     for s in (sol, sol0):
         conv, stab = np.asarray(s.converged), np.asarray(s.stable)

@@ -1,27 +1,26 @@
 """The FANUC-like quasi-serial robot written as a kinematic tree (one general model):
 
 - its deflections reproduce the independent reference data (≤ 0.5 µm);
-- its equilibrium (joint deflections and tool displacement, with a tool moment too)
-  equals the quasi-serial model's at random configurations (hypothesis), with and
-  without the parallelogram and the compensator;
+- the tree read from its file and the tree of a FANUC-form `Robot` (`as_tree`, what
+  `jaxcal.deflection` and `jaxcal.equilibrium` solve) give the same joint deflections and
+  tool displacement, with a tool moment too, at random configurations (hypothesis), with
+  and without the parallelogram and the compensator;
 - derivatives through the equilibrium with respect to the compensator's parameters
-  equal the quasi-serial model's and finite differences;
+  equal those through `as_tree` and finite differences;
 - the tree robot file round-trips, and robot-file faults get named errors;
 - absolute measurements determine the compensator that deflections cannot, and with the
   process wrench in the file (load columns) the springs the robot's weight leaves alone;
 - lateral springs after or before the joint, mass and spring-law parameters;
-- the FANUC form's tool compliance and arms' bending are springs of the tree's fixed
-  elements (to second order in the rotation), its joint nonlinearity and lost motion
-  the `joint_hardening` and `backlash` laws, an added compensator the
-  `compensator_preload` law, and the tree's discovery names a tool compliance at the
-  flange.
+- the FANUC form's joint nonlinearity and lost motion are the `joint_hardening` and
+  `backlash` laws in their units, an added compensator the file's compensator, a turned
+  tracker frame turns the deflections; the effects reach the stiffness and the
+  compensation, and the tree's discovery names a tool compliance at the flange.
 """
 
 from __future__ import annotations
 
 import copy
 import csv
-import functools
 import json
 import warnings
 from pathlib import Path
@@ -31,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.spatial.transform
 from hypothesis import given, settings, strategies as st
 
 import jaxcal
@@ -145,71 +145,22 @@ def _with(robot, *effects):
     return eqx.tree_at(lambda r: r.effects, robot, effects)
 
 
-@pytest.mark.parametrize(
-    "effect, c",
-    [
-        (jaxcal.ToolCompliance, 5.0),
-        (functools.partial(jaxcal.LinkBending, 3), 5.0),
-        (functools.partial(jaxcal.LinkBending, 2), 5.0),
-    ],
-    ids=["tool on its flange", "upper arm at the elbow", "lower arm at joint 2"],
-)
-def test_springs_of_fixed_elements_are_the_fanuc_forms_bending_effects(fanuc, effect, c):
-    """The FANUC form's tool compliance (the tool turning on the flange by a rotation
-    vector ξ, energy ½|ξ|²/c) is the springs of the tree's `wrist` (its frame at the
-    flange) about z, x, y, and its arms' bending the springs of `link3` (at the elbow)
-    and `link2` (at the joint-2 axis, turning the upper arm too, which θ2 does not)
-    about z and y, each of compliance c (`as_tree`). The two write a finite
-    rotation differently (exp(ξ) against Rz·Rx·Ry): the same to first order in ξ, so
-    the gap between their deflections falls with c², 100-fold for c divided by 10 (to
-    the next order's share, of the order of |ξ| ≈ 5 mrad here), and it is a small part
-    of what the compliance moves; under a force and a moment at the tool. (The FANUC
-    form's absent spring is one of 1e-6 µrad/(N·m), a floor of 6e-9 m here: c is
-    chosen where it is 2 % of the smaller gap.)"""
+def test_joint_effects_are_the_trees_laws_in_their_units(fanuc):
+    """The FANUC form's joint nonlinearity (the energy `¼·c·θ⁴/(κ·θref²)` added to joint
+    j's spring, θref = 1 mrad) is the tree's `joint_hardening` law on that joint, and its
+    lost motion (half-width in µrad) the `backlash` law's `b` in rad (`as_tree`)."""
     robot, _ = fanuc
-    q, f, m = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED), jnp.asarray(M_LOADED)
-    rigid = jaxcal.deflection(robot, q, f, m)
-
-    def gap_and_effect(c: float) -> tuple[float, float]:
-        r = _with(robot, effect(compliance=jnp.asarray(c)))
-        dp_tree, ok = jaxcal.tree_deflection(jaxcal.as_tree(r), q, f, m)
-        dp = jaxcal.deflection(r, q, f, m)
-        assert bool(ok)
-        return float(jnp.abs(dp_tree - dp).max()), float(jnp.abs(dp - rigid).max())
-
-    (gap, effect_size), (gap10, _) = gap_and_effect(c), gap_and_effect(c / 10)
-    assert effect_size > 1e-3 and gap < 1e-2 * effect_size
-    assert 80 < gap / gap10 < 125
-
-
-@pytest.mark.parametrize(
-    "effect, joint, value",
-    [
-        (jaxcal.JointNonlinearity, 2, 0.05),
-        (jaxcal.JointNonlinearity, 3, 0.3),
-        (jaxcal.JointNonlinearity, 5, 0.05),
-        (jaxcal.Backlash, 1, 50.0),
-        (jaxcal.Backlash, 2, 20.0),
-        (jaxcal.Backlash, 3, 200.0),
-        (jaxcal.Backlash, 5, 100.0),
-    ],
-)
-def test_joint_laws_are_the_fanuc_forms_joint_effects(fanuc, effect, joint, value):
-    """The FANUC form's joint nonlinearity `¼·c·θ⁴/(κ·θref²)` is the tree's
-    `joint_hardening` law `¼·h·(θ/θref)⁴` with `h = c·θref²/κ`, and its lost motion (an
-    energy of the joint's whole deflection, which its Newton minimises) the tree's
-    `backlash` law `θ = κτ + b·tanh(κτ/w)` (`as_tree`): the same deflections to the
-    solvers' tolerance, under a force and a moment. Joint 1 has no gravity torque (in the
-    middle of its band), joint 2 its compensator, joint 3 sits behind the parallelogram,
-    joint 5 is deflected 2 mrad, where a hardening leaves only the accelerated solver
-    that `as_tree` then chooses converging."""
-    robot, _ = fanuc
-    q, f, m = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED), jnp.asarray(M_LOADED)
-    r = _with(robot, effect(joint, jnp.asarray(value)))
-    dp_tree, ok = jaxcal.tree_deflection(jaxcal.as_tree(r), q, f, m)
-    dp = jaxcal.deflection(r, q, f, m)
-    assert bool(ok) and float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 5e-8
-    np.testing.assert_allclose(dp_tree, dp, rtol=0, atol=1e-12)
+    c, theta = 0.3, 2e-3
+    tree = jaxcal.as_tree(_with(robot, jaxcal.JointNonlinearity(3, jnp.asarray(c))))
+    (law,) = (x for x in tree.laws if x.law == "joint_hardening")
+    k = float(robot.compliance[2])
+    assert tree.names[tree.drive[law.joint]] == "J3"
+    np.testing.assert_allclose(
+        law.potential(jnp.asarray(theta)), 0.25 * c * theta**4 / (k * 1e-6), rtol=1e-12
+    )
+    tree = jaxcal.as_tree(_with(robot, jaxcal.Backlash(5, jnp.asarray(100.0))))
+    (law,) = (x for x in tree.laws if x.law == "backlash")
+    assert tree.names[tree.drive[law.joint]] == "J5" and float(law.b) == pytest.approx(1e-4)
 
 
 def test_compensator_preload_law_is_the_compensator_in_kc_and_its_preload():
@@ -242,23 +193,24 @@ def test_compensator_preload_law_is_the_compensator_in_kc_and_its_preload():
     assert isinstance(tree.laws[0], jaxcal.CompensatorPreloadLaw)
 
 
-def test_compensator_and_tracker_effects_are_the_trees_law_and_frame():
-    """A compensator added to a robot without one (parameterised by Kc and Kc·s0) is the
-    tree's `compensator` law with s0 = (Kc·s0)/Kc, and a turned tracker frame the
-    tree's measurement frame: measured deflections (marker positions loaded minus
-    unloaded, in the measurement frame) equal to the solvers' tolerance."""
+def test_compensator_and_tracker_effects_are_the_trees_law_and_frame(fanuc):
+    """A compensator added to a robot without one (parameterised by Kc and Kc·s0: the
+    tree's `compensator_preload` law) deflects the robot as the preset's compensator in
+    its robot file (the `compensator` law, Kc and s0), and a turned tracker frame (the
+    tree's measurement frame) turns every measured deflection by its rotation: under a
+    force and a moment, to the solvers' tolerance."""
+    preset, _ = fanuc
     robot, _ = _pair(compensator=None)
+    kc, kc_s0 = preset.Kc, preset.Kc * preset.s0
     q, f, m = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED), jnp.asarray(M_LOADED)
-    r = _with(
-        robot,
-        jaxcal.CompensatorSpring(Kc=jnp.asarray(8e4), Kc_s0=jnp.asarray(8e4 * 0.3)),
-        jaxcal.TrackerRotation(jnp.asarray([3e3, -2e3, 5e3])),  # µrad
-    )
-    tree = jaxcal.as_tree(r)
-    (p1, ok1), (p0, ok0) = jaxcal.predict_markers(tree, q, f, m), jaxcal.predict_markers(tree, q)
-    dp = jaxcal.deflection(r, q, f, m)
-    assert bool(ok1 & ok0) and float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 1e-5
-    np.testing.assert_allclose(p1[0] - p0[0], dp, rtol=0, atol=1e-12)
+    compensator = jaxcal.CompensatorSpring(Kc=kc, Kc_s0=kc_s0)
+    dp = jaxcal.deflection(_with(robot, compensator), q, f, m)
+    assert float(jnp.abs(dp - jaxcal.deflection(robot, q, f, m)).max()) > 1e-6
+    np.testing.assert_allclose(dp, jaxcal.deflection(preset, q, f, m), rtol=0, atol=1e-12)
+    angles = np.array([3e3, -2e3, 5e3])  # µrad
+    turned = _with(robot, compensator, jaxcal.TrackerRotation(jnp.asarray(angles)))
+    R = scipy.spatial.transform.Rotation.from_rotvec(angles * 1e-6).as_matrix()
+    np.testing.assert_allclose(jaxcal.deflection(turned, q, f, m), R @ dp, rtol=0, atol=1e-12)
 
 
 class _Sag(jaxcal.AbstractEffect):
@@ -280,8 +232,8 @@ def test_effects_without_a_tree_form_are_named(fanuc):
 def test_stiffness_and_compensation_take_the_effects(fanuc):
     """Eq. (18) and compensation of a FANUC-form robot with effects: a tool compliance c
     adds c to every direction of the tool's rotational compliance (to first order), and
-    commands compensated for a stiffening joint land the FANUC form's own model (its
-    equilibrium with the effect, the tree not involved) on target."""
+    commands compensated for a stiffening joint land the robot's equilibrium with the
+    effect (`jaxcal.equilibrium`, the single-configuration solve) on target."""
     robot, _ = fanuc
     q, f = jnp.asarray(Q_LOADED), jnp.asarray(F_LOADED)
     c = 0.5  # µrad/(N·m)
@@ -482,12 +434,10 @@ def test_absolute_measurements_under_loads(fanuc, tmp_path, capsys):
         assert abs(p["value"] - k * t.factor) <= 4 * p["std"], (p, k * t.factor)
 
 
-def test_deflection_data_calibrate_the_tree_as_the_template_model(
-    fanuc, tree_file, tmp_path, capsys
-):
+def test_deflection_data_calibrate_the_tree_as_the_fanuc_form(fanuc, tree_file, tmp_path, capsys):
     """The FANUC's deflection data (the example plan: loaded minus unloaded tool
     positions) read for the robot as a tree and calibrated through the tree's equilibrium
-    (`jaxcal identify --robot TREE.json`) give the template model's nonlinear fit, the
+    (`jaxcal identify --robot TREE.json`) give the FANUC form's nonlinear fit, the
     compensator held in both: the six compliances to 0.03 std (where either fit may stop:
     `LM_CHI2_TOL`) and their stds to 1e-4 relative (the accuracy of the tree's Jacobian,
     `JACOBIAN_RTOL`)."""
@@ -507,9 +457,9 @@ def test_deflection_data_calibrate_the_tree_as_the_template_model(
         assert abs(p["value"] - k) <= 0.03 * s, (p, k, s)
         assert abs(p["std"] - s) <= 1e-4 * s, (p, s)
     # The tree's deflections written as the data format (`jaxcal simulate`, noise-free):
-    # the template's to the file's 1e-6 mm, beyond the models' 2 nm agreement.
+    # the FANUC form's to the file's 1e-6 mm.
     sims = {}
-    for name, extra in (("tree", ["--robot", str(tree_file)]), ("template", [])):
+    for name, extra in (("tree", ["--robot", str(tree_file)]), ("fanuc", [])):
         sims[name] = tmp_path / f"{name}.csv"
         cmd = ["simulate", str(DATA / "example_calibration.csv"), "-o", str(sims[name])]
         assert main([*cmd, *extra]) == 0

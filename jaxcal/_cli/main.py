@@ -307,7 +307,7 @@ def _run(args: argparse.Namespace, own_process: bool = False) -> int:
     jax.config.update("jax_enable_x64", True)
     if own_process and args.command in ("identify", "validate", "discover"):
         # A tree robot's calibration divides its poses among one CPU device per core;
-        # the template's programs are not divided (and a different device count is a
+        # the FANUC form's programs are not divided (and a different device count is a
         # different entry of the compilation cache). `main(argv)` called from Python
         # leaves the caller's JAX as it is.
         from .._batching import one_device_per_core

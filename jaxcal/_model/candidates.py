@@ -1,15 +1,17 @@
 """Candidate effects of the discrepancy workflow: physical extensions of the stiffness
 model that a calibrated model may lack, each with its equations.
 
-Every effect is an `AbstractEffect` (see `jaxcal._model.effects`): its array fields are its
-parameters, in *user units* (µrad/(N·m), µrad, N/m, N, dimensionless), so that the
-identification works on numbers of order one; zero means "effect absent" for every one
-of them, which is where a fit starts. A `Candidate` names an effect for the workflow: how
-to build it from its parameter vector, its parameter names and typical sizes, whether
-it applies to a robot, which signs are physical, and a sentence in words.
+Every effect is an `AbstractEffect`: its array fields are its parameters, in *user
+units* (µrad/(N·m), µrad, N/m, N, dimensionless), so that the identification works on
+numbers of order one; zero means "effect absent" for every one of them, which is where a
+fit starts. In the model an effect is its form on the robot's tree (`as_tree`: springs
+of a fixed element, a spring law, the measurement frame). A `Candidate` names an effect
+for the workflow: how to build it from its parameter vector, its parameter names and
+typical sizes, whether it applies to a robot, which signs are physical, and a sentence
+in words.
 
-Adding a candidate is one small effect class plus one `Candidate(...)` entry (see
-`default_candidates`).
+Adding a candidate is one small effect class, its tree form in `as_tree`, and one
+`Candidate(...)` entry (see `default_candidates`).
 """
 
 from __future__ import annotations
@@ -18,13 +20,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._robot import URAD, AbstractEffect, Robot
-from .rotations import so3_exp
-from .spring_laws import JointBacklash
+from .._robot import AbstractEffect, Robot
 
 __all__ = [
     "LinkBending",
@@ -41,73 +40,42 @@ __all__ = [
 #: Reference joint deflection (rad) of `JointNonlinearity`: its parameter is the relative
 #: stiffness change at |θ| = 1 mrad, a typical joint deflection of a 700 kg robot.
 THETA_REF = 1e-3
-#: Smallest compliance (µrad/(N·m)) of an extra rotational spring, so that an absent
-#: effect (parameter 0) is a rigid-but-finite spring and its derivative exists at 0.
-_FLOOR = 1e-6
-
-
-def _spring(xi: Float[Array, " n"], c_urad: Float[Array, ""]) -> Float[Array, ""]:
-    # ½|ξ|²/c. A negative fitted c is allowed as the continuation of the model through
-    # "absent" (the stationary point is then a saddle); `Candidate.physical` rejects it.
-    return 0.5 * jnp.sum(xi**2) / ((c_urad + _FLOOR) * URAD)
 
 
 class LinkBending(AbstractEffect):
     """Bending compliance of a link, `joint` = 2 (lower arm) or 3 (upper arm).
 
     Two rotational springs of equal compliance `c` (µrad/(N·m)) about the two axes normal
-    to the link, ξ = (ξy, ξz) (rad), placed at the link's root: for the lower arm at the
-    joint-2 axis point about the y and z axes of the `link2` frame (x along the arm); for
-    the upper arm at the elbow about the y and z axes of R3 (x along the arm).
+    to the link, placed at the link's root: for the lower arm at the joint-2 axis point
+    about the z and y axes of the `link2` frame (x along the arm); for the upper arm at
+    the elbow about the z and y axes of R3 (x along the arm): the springs of the tree's
+    `link2` or `link3` (`as_tree`), energy `½·(ξz² + ξy²)/c`.
 
-        rotation at the site = (0, ξy, ξz) in the link frame,   E = ½·(ξy² + ξz²)/c
-
-    Each turns everything after its site (the springs of the tree's `link2` or
-    `link3`, `as_tree`). Bending about z moves the tool sideways, out of the arm's plane,
-    which no joint spring of the nominal model can do with the same lever arms. About y
-    the lower arm's turns the upper arm with it, where θ2 (through the parallelogram)
-    translates it without turning it, and leaves the compensator's angle; the upper
-    arm's is θ3 but for the crank, which it leaves (told apart through the crank's
-    weight).
+    Each turns everything after its site. Bending about z moves the tool sideways, out
+    of the arm's plane, which no joint spring of the nominal model can do with the same
+    lever arms. About y the lower arm's turns the upper arm with it, where θ2 (through
+    the parallelogram) translates it without turning it, and leaves the compensator's
+    angle; the upper arm's is θ3 but for the crank, which it leaves (told apart through
+    the crank's weight).
     """
 
     joint: int = eqx.field(static=True)
     compliance: Float[Array, ""]  # µrad/(N·m)
-    n_dof = 2
 
     def __check_init__(self):
         if self.joint not in (2, 3):
             raise ValueError(f"LinkBending joint must be 2 or 3, got {self.joint}")
 
-    def sites(self, robot, xi):
-        z = jnp.zeros_like(xi[:1])
-        return {"link2" if self.joint == 2 else "link3": jnp.concatenate([z, xi])}
-
-    def energy(self, robot, q, theta, xi):
-        return _spring(xi, self.compliance)
-
-    def dof_scale(self, robot):
-        return jnp.full((2,), (jnp.abs(self.compliance) + _FLOOR) * URAD)
-
 
 class ToolCompliance(AbstractEffect):
     """Rotational compliance `c` (µrad/(N·m)) between the flange and the tool point: the
-    tool turns about the flange by ξ ∈ R³ (rad, flange frame Rw), `E = ½|ξ|²/c`.
+    tool turns about the flange's z, x and y axes (frame Rw) by springs of compliance `c`
+    each (the springs of the tree's `wrist` element, `as_tree`), `E = ½|ξ|²/c`.
 
     About the flange x axis it duplicates joint 6; about y and z it turns the tool about
     the flange, not the wrist centre as joints 4–5 do."""
 
     compliance: Float[Array, ""]  # µrad/(N·m)
-    n_dof = 3
-
-    def sites(self, robot, xi):
-        return {"tool": xi}
-
-    def energy(self, robot, q, theta, xi):
-        return _spring(xi, self.compliance)
-
-    def dof_scale(self, robot):
-        return jnp.full((3,), (jnp.abs(self.compliance) + _FLOOR) * URAD)
 
 
 class Backlash(AbstractEffect):
@@ -116,10 +84,9 @@ class Backlash(AbstractEffect):
 
         θ = x + b·tanh(x/w),   x = k·τ,   w = 2·sqrt(b² + w0²)   (w0 = 1 µrad),
 
-    written as the energy of θ that the equilibrium minimises (`energy_beyond_linear`:
-    its stationary points are those balances exactly). For |x| ≫ w the joint is offset
-    by `b·sign τ`: it moves by `b` before its spring takes load. The energy is convex
-    (the torque grows with θ, slope at least 1/(1.5·k)) and smooth in `b` through 0.
+    For |x| ≫ w the joint is offset by `b·sign τ`: it moves by `b` before its spring
+    takes load. The deflection grows with the torque (slope k to 1.5·k) and is smooth
+    in `b` through 0.
     Unloaded joints with no gravity torque (joint 1) sit in the middle of the band, so
     every load shows the full lost motion `b`; gravity-preloaded joints show it only
     when a load reverses their torque.
@@ -132,10 +99,6 @@ class Backlash(AbstractEffect):
         if self.joint not in range(1, 7):
             raise ValueError(f"Backlash joint must be 1..6, got {self.joint}")
 
-    def energy(self, robot, q, theta, xi):
-        law = JointBacklash(b=self.half_width * URAD, joint=self.joint - 1)
-        return law.energy_beyond_linear(theta[self.joint - 1], robot.compliance[self.joint - 1])
-
 
 class JointNonlinearity(AbstractEffect):
     """Joint stiffness that changes with the joint's deflection (hardening `c > 0`,
@@ -143,7 +106,8 @@ class JointNonlinearity(AbstractEffect):
 
     Energy `½θ²/k·(1 + ½c·θ²/θref²)` (θref = 1 mrad), i.e. torque `θ/k·(1 + c·θ²/θref²)`
     and tangent stiffness `(1 + 3c·θ²/θref²)/k`: `c` is the relative change of the
-    secant stiffness at |θ| = 1 mrad. This effect adds `¼ c θ⁴/(k θref²)`. Because the
+    secant stiffness at |θ| = 1 mrad. This effect adds `¼ c θ⁴/(k θref²)`: the tree's
+    `joint_hardening` law `¼·h·(θ/θref)⁴` with `h = c·θref²/k` (`as_tree`). Because the
     measurements are loaded minus unloaded, it shows where a joint's deflection differs
     between rows (two load levels, gravity preload): the response is no longer
     proportional to the load.
@@ -156,10 +120,6 @@ class JointNonlinearity(AbstractEffect):
         if self.joint not in range(1, 7):
             raise ValueError(f"JointNonlinearity joint must be 1..6, got {self.joint}")
 
-    def energy(self, robot, q, theta, xi):
-        t = theta[self.joint - 1]
-        return 0.25 * self.hardening * t**4 / (robot.compliance[self.joint - 1] * THETA_REF**2)
-
 
 class CompensatorSpring(AbstractEffect):
     """A spring gravity compensator on joint 2 for a robot whose file declares none.
@@ -169,7 +129,8 @@ class CompensatorSpring(AbstractEffect):
     `s(φ2)² = lc² + l2² − 2·lc·l2·cos φ2` (eq. 7), `V = ½Kc(s − s0)²`. Parameterised by
     `(Kc, Kc·s0)`, in which `V = ½Kc·s² − (Kc·s0)·s + const` is *linear* (the constant
     does not depend on φ2 and so never changes a deflection): the fit is then
-    well-conditioned from "absent" (both zero), and `s0 = (Kc·s0)/Kc`.
+    well-conditioned from "absent" (both zero), and `s0 = (Kc·s0)/Kc`. The tree's
+    `compensator_preload` law (`as_tree`).
     """
 
     Kc: Float[Array, ""]  # N/m
@@ -177,23 +138,16 @@ class CompensatorSpring(AbstractEffect):
     lc: float = 0.235
     l2: float = 0.6
 
-    def energy(self, robot, q, theta, xi):
-        phi2 = q[1] + theta[1]
-        s2 = self.lc**2 + self.l2**2 - 2.0 * self.lc * self.l2 * jnp.cos(phi2)
-        return 0.5 * self.Kc * s2 - self.Kc_s0 * jnp.sqrt(s2)
-
 
 class TrackerRotation(AbstractEffect):
     """Decoy: the tracker frame turned by a small rotation vector `α` (µrad) from the
-    base frame, so every measured deflection is `R(α)·Δp`.
+    base frame, so every measured deflection is `R(α)·Δp` (the tree's measurement frame,
+    `as_tree`).
 
     Deflections of a few mm turned by 1 mrad change by a few µm: the data cannot
     support this effect, and the workflow must not pick it by chance."""
 
     angles: Float[Array, 3]  # µrad
-
-    def observe(self, robot, q, force, dp):
-        return so3_exp(self.angles * URAD) @ dp
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,11 @@
-"""Forward kinematics with actuated angles q and virtual-spring deflections θ.
+"""Forward kinematics of a FANUC-form `Robot` with actuated angles q and spring
+deflections: the named nodes of `shared/spec/robot.md` read off the frames of the
+robot's tree (`as_tree`), the one model of every robot.
 
-Conventions are those of `shared/spec/robot.md`: base frame z up, link-side angles
-φi = qi + θi, and with the active parallelogram φ3 is the *absolute* upper-arm angle
-(the joint-2 spring translates the upper arm without turning it). A plain serial robot
-has φ3 = q3 + θ3 − θ2.
+Conventions are the specification's: base frame z up, link-side angles φi = qi + θi,
+and with the active parallelogram φ3 is the *absolute* upper-arm angle (the joint-2
+spring translates the upper arm without turning it). A plain serial robot has
+φ3 = q3 + θ3 − θ2.
 
 All functions handle one configuration; batch with `jax.vmap`.
 """
@@ -17,7 +19,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._robot import Robot
-from .rotations import Rx, Ry, Rz, angular_jacobian, so3_exp
+from .._robot_tree import as_tree, spring_order, springs_of
+from .rotations import angular_jacobian
+from .tree_kinematics import element_poses, marker_of_frames, rpy_matrix
 
 __all__ = [
     "Pose",
@@ -26,15 +30,7 @@ __all__ = [
     "wrist_centre",
     "mass_positions",
     "jacobian_theta",
-    "EXTRA_SITES",
 ]
-
-#: Sites where extra (non-joint) compliance can rotate the structure, used by the model
-#: extensions of the discrepancy workflow. Each takes a rotation vector (rad) in the
-#: body frame named and turns everything after the site: `link2` bends the lower arm
-#: about the joint-2 axis point (frame of body `link2`), `link3` bends the upper arm at
-#: the elbow (frame R3), `tool` rotates the tool about the flange (frame Rw).
-EXTRA_SITES: tuple[str, ...] = ("link2", "link3", "tool")
 
 
 class Pose(NamedTuple):
@@ -51,15 +47,15 @@ class Pose(NamedTuple):
     p_tool: Float[Array, 3]
     #: The tool's frame: `Rw` turned on the flange by a tool compliance (else `Rw`).
     Rt: Float[Array, "3 3"]
-    #: The crank's frame: `R3` unbent by a bending of the upper arm at the elbow.
+    #: The crank's frame, which turns with the upper arm's angle but not with the arms'
+    #: bending.
     R_crank: Float[Array, "3 3"]
 
 
 def forward(
     robot: Robot,
     q: Float[Array, 6],
-    theta: Float[Array, 6],
-    extra: dict[str, Float[Array, 3]] | None = None,
+    x: Float[Array, " ndof"] | None = None,
 ) -> Pose:
     """Forward kinematics of one configuration.
 
@@ -67,54 +63,49 @@ def forward(
 
     - `robot`: the robot.
     - `q`: actuated (motor-side) angles, rad.
-    - `theta`: virtual-spring deflections, rad (link-side angle φ = q + θ).
-    - `extra`: optional rotation vectors (rad) at the sites of `EXTRA_SITES`.
+    - `x`: spring deflections, rad (default zero): the joint springs θ1..θ6 (link-side
+      angle φ = q + θ), optionally followed by the springs of the robot's model effects
+      (the order of `jaxcal.equilibrium`'s result).
 
     **Returns** a `Pose` (base frame, m).
     """
-    extra = {} if extra is None else extra
-    d1, a1, a2, a3, d4, d6 = (robot.geometry[i] for i in range(6))
-    phi = q + theta
-    phi3 = phi[2] if robot.parallelogram else phi[2] - theta[1]
-    R1 = Rz(phi[0])
-    p_j2 = R1 @ jnp.stack([a1, jnp.zeros_like(a1), d1])
-    R_link2 = R1 @ Ry(phi[1] - jnp.pi / 2)
-    R3 = R1 @ Ry(-phi3)
-    # The crank, on the joint-2 axis, turns with the upper arm's angle but not with the
-    # arms' bending.
-    R_crank = R3
-    if "link2" in extra:
-        # Lower-arm bending at its root: everything after it turns (the upper arm too,
-        # unlike θ2 through the parallelogram), as a spring on the tree's `link2` does.
-        Rb = R_link2 @ so3_exp(extra["link2"]) @ R_link2.T
-        R_link2 = Rb @ R_link2
-        R3 = Rb @ R3
-    # x of the link2 frame is the lower-arm direction u2 = (sin φ2, 0, cos φ2) in R1.
-    p_elbow = p_j2 + a2 * R_link2[:, 0]
-    if "link3" in extra:
-        R3 = R3 @ so3_exp(extra["link3"])
-    p_wrist = p_elbow + R3 @ jnp.stack([d4, jnp.zeros_like(d4), a3])
-    Rw = R3 @ Rx(phi[3]) @ Ry(phi[4]) @ Rx(phi[5])
-    p_flange = p_wrist + Rw[:, 0] * d6
-    Rt = Rw @ so3_exp(extra["tool"]) if "tool" in extra else Rw
-    p_tool = p_flange + Rt @ robot.tool_point
-    return Pose(R1, p_j2, R_link2, p_elbow, R3, p_wrist, Rw, p_flange, p_tool, Rt, R_crank)
+    tree = as_tree(robot)
+    ndof = spring_order(tree).size
+    x = jnp.zeros(6, q.dtype) if x is None else jnp.asarray(x)
+    if x.shape == (6,) and ndof > 6:  # the joint springs alone
+        x = jnp.concatenate([x, jnp.zeros(ndof - 6, x.dtype)])
+    R, t = element_poses(tree, q, springs_of(tree, x))
+    at = {name: i for i, name in enumerate(tree.names)}
+    wrist = at["wrist"]
+    return Pose(
+        R1=R[at["J1"]],
+        p_j2=t[at["J2"]],
+        R_link2=R[at["link2"]],
+        p_elbow=t[at["J3"]],
+        R3=R[at["link3"]],
+        p_wrist=t[at["J6"]],
+        # The flange frame before the wrist element's own springs (a tool compliance).
+        Rw=R[at["J6"]] @ rpy_matrix(tree.origin[wrist, 3:]),
+        p_flange=t[wrist],
+        p_tool=marker_of_frames(tree, R, t, 0),
+        Rt=R[wrist],
+        R_crank=R[at["crank_body"]],
+    )
 
 
 def tool_point(
-    robot: Robot, q: Float[Array, 6], theta: Float[Array, 6] | None = None
+    robot: Robot, q: Float[Array, 6], theta: Float[Array, " ndof"] | None = None
 ) -> Float[Array, 3]:
-    """Tool point `pT` (m, base frame), where loads act and the tracker measures."""
-    theta = jnp.zeros_like(q) if theta is None else theta
+    """Tool point `pT` (m, base frame), where loads act and the tracker measures, at
+    spring deflections `theta` (as `forward`'s `x`; default zero)."""
     return forward(robot, q, theta).p_tool
 
 
 def wrist_centre(
-    robot: Robot, q: Float[Array, 6], theta: Float[Array, 6] | None = None
+    robot: Robot, q: Float[Array, 6], theta: Float[Array, " ndof"] | None = None
 ) -> Float[Array, 3]:
     """Wrist centre `pW` (m, base frame); the experiment limits constrain its height and
     its distance from axis 1."""
-    theta = jnp.zeros_like(q) if theta is None else theta
     return forward(robot, q, theta).p_wrist
 
 

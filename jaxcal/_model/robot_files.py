@@ -56,7 +56,7 @@ def load_tree(spec: str | Path) -> TreeRobot:
 
 def is_tree_file(spec: str | Path) -> bool:
     """Whether a preset name or robot file describes a general robot (a tree robot
-    file, a URDF or a file naming one) rather than the quasi-serial template."""
+    file, a URDF or a file naming one) rather than the quasi-serial form."""
     if str(spec) in TREE_PRESETS or str(spec).lower().endswith(".urdf"):
         return True
     try:

@@ -24,7 +24,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -194,21 +193,6 @@ class JointBacklash(SpringLaw):
     def extra(self, theta_lin: Float[Array, ""]) -> Float[Array, ""]:
         return _lost_motion(theta_lin, self.b)
 
-    def energy_beyond_linear(
-        self, theta: Float[Array, ""], kappa: Float[Array, ""]
-    ) -> Float[Array, ""]:
-        """The same law as an energy of the joint's whole deflection `θ` (rad), for a
-        solver that minimises over θ (the FANUC form's `Backlash`): `E(θ) − ½θ²/κ` (J)
-        with `E'(θ) = x/κ = τ`, where `θ = x + extra(x)` and `x = κ·τ` (a complementary
-        energy: `E = (x·θ − ½x² − b·w·log cosh(x/w))/κ`, here less `½θ²/κ`, which
-        leaves `−(½·(θ − x)² + b·w·log cosh(x/w))/κ`). Its stationary points are the
-        law's balances exactly; 0 at `b = 0`."""
-        x = _linear_part(theta, self.b)
-        w = _backlash_width(self.b)
-        y = jnp.abs(x / w)
-        log_cosh = y + jnp.log1p(jnp.exp(-2.0 * y)) - jnp.log(2.0)
-        return -(0.5 * (theta - x) ** 2 + self.b * w * log_cosh) / kappa
-
 
 def _backlash_width(b: Float[Array, ""]) -> Float[Array, ""]:
     return 2.0 * jnp.sqrt(b**2 + BACKLASH_W0**2)
@@ -216,36 +200,6 @@ def _backlash_width(b: Float[Array, ""]) -> Float[Array, ""]:
 
 def _lost_motion(x: Float[Array, ""], b: Float[Array, ""]) -> Float[Array, ""]:
     return b * jnp.tanh(x / _backlash_width(b))
-
-
-#: Newton steps of `_linear_part`: from its start the error is at round-off (5e-15 of
-#: the band) after 3, for any ratio of θ to the band (the map's slope is 1 to 1.5).
-_INVERSE_STEPS = 6
-
-
-@jax.custom_jvp
-def _linear_part(theta: Float[Array, ""], b: Float[Array, ""]) -> Float[Array, ""]:
-    """`x` with `x + b·tanh(x/w) = θ` (the inverse of the lost motion, monotone with
-    slope 1 to 1.5); its derivatives by the implicit function theorem."""
-    x0 = theta - _lost_motion(theta, b)
-
-    def step(_, x):
-        r, slope = jax.jvp(lambda y: y + _lost_motion(y, b), (x,), (jnp.ones_like(x),))
-        return x - (r - theta) / slope
-
-    return jax.lax.fori_loop(0, _INVERSE_STEPS, step, x0)
-
-
-@_linear_part.defjvp
-def _linear_part_jvp(primals, tangents):
-    theta, b = primals
-    dtheta, db = tangents
-    x = _linear_part(theta, b)
-    # θ = g(x, b): dθ = g_x·dx + g_b·db.
-    g = lambda y, c: y + _lost_motion(y, c)  # noqa: E731
-    _, g_x = jax.jvp(lambda y: g(y, b), (x,), (jnp.ones_like(x),))
-    _, g_b_db = jax.jvp(lambda c: g(x, c), (b,), (db,))
-    return x, (dtheta - g_b_db) / g_x
 
 
 SPRING_LAWS: dict[str, type[SpringLaw]] = {

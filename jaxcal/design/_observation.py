@@ -18,7 +18,7 @@ for the two parameter sets and the two observation models (criteria: `design/_cr
 - `"full"` (the default of `design_criteria`, `optimise_design` and the CLI): the
   Jacobian of the full equilibrium deflection (loaded minus gravity-only equilibrium)
   in the parameters, the same matrix as `jaxcal.observation_physical`, by the implicit
-  function theorem (`implicit_step`, see `_equilibrium_sensitivity`) so that its q-gradient
+  function theorem on the robot's tree (see `_equilibrium_sensitivity`) so that its q-gradient
   compiles and runs fast enough to optimise on.
 - `"linear"`: eq. (5) with joint 2's compliance replaced by the aggregated
   `1/(1/k2 + K_comp(q2; Kc, s0))` (eq. 10), by autodiff; ~10x cheaper per gradient. It
@@ -35,19 +35,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._linalg.dense import cho_solve, cholesky
+from .._linalg.dense import lu_factor, lu_solve
 from .._model.compensator import compensator_stiffness
-from .._model.equilibrium import (
-    implicit_step,
-    solve_deflection,
-    solve_state,
-    tool_pose,
-    total_potential,
-)
+from .._model.equilibrium import solve_deflection
 from .._model.kinematics import forward, jacobian_theta
 from .._model.rotations import Rx
+from .._model.tree_kinematics import marker_positions
+from .._model.tree_statics import spring_residual, stable_balance, tree_equilibrium
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
+from .._robot_tree import as_tree, spring_order, springs_of
 
 __all__ = [
     "PARAMETER_SETS",
@@ -139,26 +136,37 @@ def _full_columns_autodiff(robot: Robot, p0, q, force, moment) -> Float[Array, "
 
 def _equilibrium_sensitivity(robot: Robot, p0, q, force):
     # Tool-point sensitivity ∂pT(q, x*)/∂params (3, p) at the equilibrium x* of one load,
-    # by the implicit function theorem written out: ∂x*/∂p = −H⁻¹ ∂²U/∂x∂p.
+    # by the implicit function theorem written out on the robot's tree: ∂x*/∂p =
+    # −A⁻¹ ∂r/∂p, with r the tree's spring residual on the springs x and A = ∂r/∂x.
     #
     # Why not jacfwd through `solve_deflection`: the design optimiser differentiates this
-    # in q, a second derivative through the root find; nesting autodiff through
-    # optimistix's implicit adjoint compiles to a much larger program. Here the root is
-    # found without derivatives (stop_gradient) and `implicit_step` with its Hessian
-    # frozen gives x1 with the exact value and first derivative in q, which is all the
-    # q-gradient of the criterion needs.
-    def U(p, x, a):
-        return total_potential(set_parameters(robot, p), a, x, force)
+    # in q, a second derivative through the fixed point; nesting autodiff through its
+    # implicit derivative compiles to a much larger program. Here the root is found
+    # without derivatives (stop_gradient) and one Newton step with its matrix frozen gives
+    # x1 with the exact value and first derivative in q, which is all the q-gradient of
+    # the criterion needs.
+    tree = as_tree(robot)
+    order = spring_order(tree)
 
-    eq = solve_state(robot, jax.lax.stop_gradient(q), force, None, check_stability=False)
-    xs = jax.lax.stop_gradient(eq.x)
-    x1, ok = implicit_step(robot, q, force, None, xs, eq.converged, frozen_hessian=True)
-    L = cholesky(jax.hessian(U, 1)(p0, x1, q))
-    Gp = jax.jacfwd(jax.grad(U, 1), 0)(p0, x1, q)  # (ndof, p)
-    J = jax.jacfwd(lambda x: tool_pose(robot, q, x)[0])(x1)
-    # A Cholesky pivot that is not positive: not a stable equilibrium (a saddle).
-    ok = ok & jnp.all(jnp.isfinite(L)) & jnp.all(jnp.diagonal(L) > 0)
-    return -J @ cho_solve(L, Gp), ok
+    def residual(p, x, a):
+        t = as_tree(set_parameters(robot, p))
+        return spring_residual(springs_of(t, x), (t, a, force, None, 0)).reshape(-1)[order]
+
+    qs = jax.lax.stop_gradient(q)
+    eq = tree_equilibrium(tree, qs, force=force, check_stability=False)
+    xs = jax.lax.stop_gradient(eq.phi.reshape(-1)[order])
+    A0 = jax.lax.stop_gradient(jax.jacfwd(residual, 1)(p0, xs, qs))
+    good = eq.converged & jnp.all(jnp.isfinite(A0))
+    # A failed equilibrium gets a harmless identity (the row is NaN below).
+    A0 = jnp.where(good, A0, jnp.eye(A0.shape[0], dtype=A0.dtype))
+    x1 = xs - jnp.where(good, lu_solve(*lu_factor(A0), residual(p0, xs, q)), 0.0)
+    A = jax.jacfwd(residual, 1)(p0, x1, q)
+    Rp = jax.jacfwd(residual, 0)(p0, x1, q)
+    J = jax.jacfwd(lambda x: marker_positions(tree, q, springs_of(tree, x))[0])(x1)
+    # A balance that is no minimum (a saddle) is no equilibrium.
+    back = np.argsort(order)
+    ok = good & stable_balance(tree, A[back][:, back])
+    return -J @ lu_solve(*lu_factor(A), Rp), ok
 
 
 def _full_columns(robot: Robot, p0, q, force, moment) -> Float[Array, "3 p"]:
