@@ -4,8 +4,8 @@ Why this exists: on the CPU, jaxlib turns a batched `jnp.linalg` / `jax.scipy.li
 call (and lineax's `LU`, `QR`, `Cholesky`, which use them) into a LAPACK kernel that
 runs on one of XLA's intra-op pool threads, splits its batch into tasks *on that same
 pool* and blocks until they finish. When as many such kernels run at once as the pool
-has threads (two on a 2-core machine: the loaded and unloaded equilibrium solves of one
-vmapped measurement are enough), every thread waits for tasks that no thread is free to
+has threads (two on a 2-core machine: two LU solves of one vmapped measurement are
+enough), every thread waits for tasks that no thread is free to
 run and the process hangs forever (seen with jaxlib 0.10.2: `lapack_dsyevd_ffi` and
 `lapack_dgetrf_ffi` in `ParallelBatchMap`, all pool threads parked on a counter).
 
@@ -14,8 +14,8 @@ elimination written out in `jnp` costs nothing, vmaps into ordinary fused XLA co
 differentiable. Each elimination step is a masked vector operation inside a
 `fori_loop`, so the traced program has the same small size whatever n.
 
-The lineax solvers at the bottom plug these into optimistix (Newton, Levenberg–Marquardt)
-and into `lx.linear_solve`.
+The lineax solvers at the bottom plug these into optimistix (Levenberg–Marquardt) and
+into `lx.linear_solve`.
 """
 
 from __future__ import annotations
@@ -40,7 +40,6 @@ __all__ = [
     "qr_lstsq",
     "qr_min_norm",
     "eigvalsh",
-    "SmallLU",
     "SmallCholesky",
     "SmallQR",
 ]
@@ -295,20 +294,6 @@ class _SmallDense(lx.AbstractLinearSolver):
 
     def assume_full_rank(self) -> bool:
         return True
-
-
-class SmallLU(_SmallDense):
-    """lineax solver for small square systems: LU with partial pivoting in plain `jnp`
-    (see the module docstring for why not `lx.LU`)."""
-
-    def _factor(self, matrix):
-        if matrix.shape[0] != matrix.shape[1]:
-            raise ValueError(f"SmallLU needs a square operator, got {matrix.shape}")
-        return lu_factor(matrix)
-
-    def _solve(self, factors, b, transpose):
-        lu, perm = factors
-        return lu_solve(lu, perm, b, trans=transpose)
 
 
 class SmallCholesky(_SmallDense):

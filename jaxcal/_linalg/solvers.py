@@ -1,7 +1,6 @@
 """The one switch between jaxcal's LAPACK-free lineax solvers (`dense.py`) and lineax's
-own `LU`, `Cholesky` and `QR`: every solve of the package (Newton's steps and the
-implicit adjoint of the equilibrium, Levenberg–Marquardt's steps, covariances, the
-linear model's compliance) takes its solver from here.
+own `Cholesky` and `QR`: every lineax solve of the package (Levenberg–Marquardt's steps,
+covariances, the Cartesian stiffness) takes its solver from here.
 
 Default `"dense"`: on the CPU, batched LAPACK kernels can deadlock XLA's thread pool
 (see `dense.py`), and the matrices are tiny. Set the environment variable
@@ -24,9 +23,9 @@ import warnings
 
 import lineax as lx
 
-from .dense import SmallCholesky, SmallLU, SmallQR
+from .dense import SmallCholesky, SmallQR
 
-__all__ = ["BACKENDS", "linalg_backend", "lu_solver", "cholesky_solver", "qr_solver"]
+__all__ = ["BACKENDS", "linalg_backend", "cholesky_solver", "qr_solver"]
 
 #: The values of `JAXCAL_LINALG`.
 BACKENDS = ("dense", "lineax")
@@ -48,11 +47,6 @@ _BACKEND = _read()
 def linalg_backend() -> str:
     """The solvers in use: `"dense"` (jaxcal's) or `"lineax"` (read at import)."""
     return _BACKEND
-
-
-def lu_solver() -> lx.AbstractLinearSolver:
-    """Square systems (LU with partial pivoting)."""
-    return SmallLU() if _BACKEND == "dense" else lx.LU()
 
 
 def cholesky_solver() -> lx.AbstractLinearSolver:

@@ -123,8 +123,8 @@ def _linear_columns(robot: Robot, q, force, moment) -> Float[Array, "3 6"]:
 
 
 def _full_columns_autodiff(robot: Robot, p0, q, force, moment) -> Float[Array, "3 p"]:
-    # ∂Δp/∂params by forward mode through `solve_deflection` (optimistix implicit adjoint),
-    # for robots with model extensions (their observation-level effects act on Δp). NaN
+    # ∂Δp/∂params by forward mode through `solve_deflection` (the tree's implicit
+    # derivative), for robots with model effects or a tool moment. NaN
     # if an equilibrium solve failed, so the criteria report +inf, never a number.
     def dp(p):
         return solve_deflection(set_parameters(robot, p), q, force, moment)
