@@ -138,6 +138,14 @@ def test_equilibrium_potential_is_minimal_nearby(robot, rows):
         assert np.all(np.asarray(U(sol.x + d, q, F)) > U0)
 
 
+def test_total_potential_of_a_lost_motion_is_refused(robot):
+    """A lost motion has no potential of the joint's deflection in closed form: named,
+    not a wrong number."""
+    r = eqx.tree_at(lambda r: r.effects, robot, (jaxcal.Backlash(2, jnp.asarray(20.0)),))
+    with pytest.raises(ValueError, match="lost motion"):
+        jaxcal.total_potential(r, jnp.zeros(6), jnp.zeros(6), jnp.zeros(3))
+
+
 def test_vmap_equals_loop_and_jit(robot, rows):
     q, F = rows
     p0 = jaxcal.get_parameters(robot)
