@@ -1,8 +1,8 @@
 """Benchmark: full-model deflections (static equilibrium under gravity, compensator and a
 tool force; loaded minus unloaded) for N configurations,
 
-- jaxcal: `solve_deflection` vmapped over the N rows and jit-compiled (Newton with
-  autodiff Hessians, stability check included); compile and run timed separately
+- jaxcal: `solve_deflection` vmapped over the N rows and jit-compiled (the robot's tree,
+  its accelerated fixed point, stability check included); compile and run timed separately
   (`jax.jit(...).lower(...).compile()`, then calls with `block_until_ready`);
 - plain numpy: the same model of `shared/spec/robot.md`, vectorised over the N rows by
   hand: forward kinematics of all nodes, Jacobians by central differences, and the

@@ -12,7 +12,8 @@ a wall-clock limit; a run past the limit counts as a hang.
 
 Cases:
 - `jaxcal`: `model_deflections` of a 41 × 25 grid of configurations with
-  `JAXCAL_LINALG=lineax` (lineax's LU in every Newton step of both equilibria);
+  `JAXCAL_LINALG=lineax` (its equilibria, on the robot's tree, factor with jaxcal's own
+  LU under either backend);
 - `eigh`: the smallest program of the kind: two independent batched `eigh` and two
   batched `solve` in one jit.
 
