@@ -36,7 +36,7 @@ from ._model.tree_files import tree_from_dict
 from ._robot import URAD, Robot
 from ._robot_file import robot_to_dict
 
-__all__ = ["as_tree", "spring_order", "springs_of"]
+__all__ = ["as_tree", "spring_order", "springs_of", "spring_vector"]
 
 
 def as_tree(robot: Robot) -> TreeRobot:
@@ -152,6 +152,11 @@ def springs_of(tree: TreeRobot, x: Float[Array, " ndof"]) -> Float[Array, "r 3"]
         raise ValueError(f"x must have shape ({order.size},), got {jnp.shape(x)}")
     full = jnp.zeros(3 * len(tree.elastic), x.dtype).at[jnp.asarray(order)].set(x)
     return full.reshape(-1, 3)
+
+
+def spring_vector(tree: TreeRobot, phi: Float[Array, "r 3"]) -> Float[Array, " ndof"]:
+    """The vector `x` of the tree's deflections `φ` (r, 3): `springs_of`'s inverse."""
+    return phi.reshape(-1)[jnp.asarray(spring_order(tree))]
 
 
 def _spring_site(effect) -> tuple[str, tuple[str, ...], Array] | None:

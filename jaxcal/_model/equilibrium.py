@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from .._robot import Robot
-from .._robot_tree import as_tree, spring_order, springs_of
+from .._robot_tree import as_tree, spring_vector, springs_of
 from .._solution import RESULTS, result_of
 from .tree import TreeRobot
 from .tree_kinematics import marker_positions
@@ -144,7 +144,7 @@ def solve_equilibrium(
     under `jax.vmap`, where failed samples must be reported)."""
     tree, q, force, moment = _inputs(robot, q, force, moment)
     phi, result = _state(tree, q, force, moment)
-    return Equilibrium(x=phi.reshape(-1)[jnp.asarray(spring_order(tree))], result=result)
+    return Equilibrium(x=spring_vector(tree, phi), result=result)
 
 
 @eqx.filter_jit

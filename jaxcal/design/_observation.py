@@ -44,7 +44,7 @@ from .._model.tree_kinematics import marker_positions
 from .._model.tree_statics import spring_residual, stable_balance, tree_equilibrium
 from .._parameters import get_parameters, set_parameters
 from .._robot import URAD, Robot
-from .._robot_tree import as_tree, spring_order, springs_of
+from .._robot_tree import as_tree, spring_order, spring_vector, springs_of
 
 __all__ = [
     "PARAMETER_SETS",
@@ -150,11 +150,11 @@ def _equilibrium_sensitivity(robot: Robot, p0, q, force):
 
     def residual(p, x, a):
         t = as_tree(set_parameters(robot, p))
-        return spring_residual(springs_of(t, x), (t, a, force, None, 0)).reshape(-1)[order]
+        return spring_vector(t, spring_residual(springs_of(t, x), (t, a, force, None, 0)))
 
     qs = jax.lax.stop_gradient(q)
     eq = tree_equilibrium(tree, qs, force=force, check_stability=False)
-    xs = jax.lax.stop_gradient(eq.phi.reshape(-1)[order])
+    xs = jax.lax.stop_gradient(spring_vector(tree, eq.phi))
     A0 = jax.lax.stop_gradient(jax.jacfwd(residual, 1)(p0, xs, qs))
     good = eq.converged & jnp.all(jnp.isfinite(A0))
     # A failed equilibrium gets a harmless identity (the row is NaN below).
