@@ -32,7 +32,7 @@ import jax
 import jax.core
 import numpy as np
 
-from ._batching import dividing_among_devices
+from ._batching import dividing_among_devices, to_device
 from ._io import atomic_file
 
 __all__ = ["export_directory", "exported", "set_export_directory"]
@@ -147,10 +147,7 @@ def _uncommitted(arrays: list) -> list:
     JAX has no public way to drop an array's commitment in place); arrays of an extended
     dtype (PRNG keys), which have no host form, as they are."""
     return [
-        a
-        if jax.dtypes.issubdtype(a.dtype, jax.dtypes.extended)
-        else jax.numpy.asarray(np.asarray(a))
-        for a in arrays
+        a if jax.dtypes.issubdtype(a.dtype, jax.dtypes.extended) else to_device(a) for a in arrays
     ]
 
 

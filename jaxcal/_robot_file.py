@@ -13,9 +13,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
+from ._batching import to_device
 from ._keys import check_keys
 from ._model.robot_files import TREE_PRESETS
 from ._ranges import check_robot_values
@@ -193,7 +193,7 @@ def _robot_from_dict(d: dict) -> Robot:
             noise_std=noise * 1e-3,
         )
     check_robot_values(d)
-    f = lambda x: jnp.asarray(np.asarray(x, dtype=float))
+    f = lambda x: to_device(np.asarray(x, dtype=float))
     return Robot(
         compliance=f(comp) * URAD,
         Kc=f(Kc),

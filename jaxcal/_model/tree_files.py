@@ -7,9 +7,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
+from .._batching import to_device
 from .._keys import check_keys
 from .rotations import rpy_from_matrix
 from .spring_laws import spring_law_from_dict, spring_law_to_dict
@@ -221,15 +221,15 @@ def tree_from_dict(d: dict) -> TreeRobot:
     check_keys(world, "world.", _KNOWN["world"])
     g = np.asarray(d.get("gravity_m_per_s2", [0.0, 0.0, -G]), np.float64)
 
-    f = jnp.asarray
+    f = to_device
     return TreeRobot(
         origin=f(np.array(origins)),
         dh=f(np.array(dhs)),
         compliance=f(np.array(comps)),
-        mass_kg=f(np.array(mass_kg)).reshape(len(mass_el)),
-        mass_at=f(np.array(mass_at)).reshape(len(mass_el), 3),
-        marker_at=f(np.array(mk_at)).reshape(len(mk_el), 3),
-        world=f(_pose(world, "world", "xyz_m", "rpy_deg", "matrix")),
+        mass_kg=f(np.array(mass_kg).reshape(len(mass_el))),
+        mass_at=f(np.array(mass_at).reshape(len(mass_el), 3)),
+        marker_at=f(np.array(mk_at).reshape(len(mk_el), 3)),
+        world=f(np.asarray(_pose(world, "world", "xyz_m", "rpy_deg", "matrix"))),
         gravity=f(g),
         joint_limits=f(np.array(limits)),
         names=tuple(names),

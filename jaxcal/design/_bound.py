@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import to_device
 from .._exported import exported
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
@@ -121,9 +122,9 @@ def candidate_pool(
             rows.append(qi)
             level += [i] * per
         q, level = np.concatenate(rows), np.asarray(level)
-    force = np.asarray(design_loads(robot, jnp.asarray(q), "vertical"))
+    force = np.asarray(design_loads(robot, to_device(q), "vertical"))
     if loads == "mixed":
-        side = np.asarray(horizontal_loads(robot, jnp.asarray(q)))
+        side = np.asarray(horizontal_loads(robot, to_device(q)))
         q, level = np.concatenate([q, q]), np.concatenate([level, level])
         force = np.concatenate([force, side])
     return q, force, level
@@ -142,11 +143,11 @@ def _observe(robot, problem: DesignProblem, q, force, level, n_levels, chunk=512
     for s in range(0, len(qp), chunk):
         obs, nominal = observe_jit(
             problem.robot,
-            jnp.asarray(qp[s : s + chunk]),
-            jnp.asarray(fp[s : s + chunk]),
+            to_device(qp[s : s + chunk]),
+            to_device(fp[s : s + chunk]),
             None,
             problem.parameters,
-            jnp.asarray(lp[s : s + chunk]) if agg else None,
+            to_device(lp[s : s + chunk]) if agg else None,
             n_levels if agg else None,
             problem.k1,
             problem.obs_model,
@@ -261,7 +262,7 @@ def design_bound(
         levels = np.array([v for v in levels if feasible_q3_range(robot, math.radians(v))])
     q, force, level = candidate_pool(robot, n, seed=seed, levels_deg=levels, loads=problem.loads)
     if len(inc):
-        finc = np.asarray(design_loads(robot, jnp.asarray(inc), problem.loads))
+        finc = np.asarray(design_loads(robot, to_device(inc), problem.loads))
         if agg:
             assert levels is not None
             linc = np.searchsorted(levels, np.round(np.degrees(inc[:, 1]), 6))
@@ -333,10 +334,10 @@ def design_bound(
     active = np.arange(len(choices))
     for _ in range(max_rounds):
         wa, pa, da = _rounds(
-            jnp.asarray(As[active]),
-            jnp.asarray(masks[active]),
-            jnp.asarray(w[active]),
-            jnp.asarray(Wm[active]),
+            to_device(As[active]),
+            to_device(masks[active]),
+            to_device(w[active]),
+            to_device(Wm[active]),
             sigma2,
             kind,
             _ROUND,

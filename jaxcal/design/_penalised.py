@@ -20,7 +20,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._batching import batch_map
+from .._batching import batch_map, to_device
 from .._exported import exported
 from ._bound import design_bound
 from ._constraints import constraint_values, design_bounds
@@ -88,7 +88,7 @@ def encode(problem: DesignProblem, q: np.ndarray) -> tuple[Array, Array]:
     else:
         gi = np.asarray(g)
         v = np.stack([u[:, gi == k, 1].mean(axis=1) for k in range(problem.n_groups)], 1)
-    return jnp.asarray(u), jnp.asarray(v)
+    return to_device(u), to_device(v)
 
 
 def _gap_violation(problem: DesignProblem, v) -> Float[Array, " pairs"]:
