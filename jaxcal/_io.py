@@ -14,10 +14,10 @@ from pathlib import Path
 from typing import TextIO
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._batching import to_device
 from ._output import (
     OutputError as OutputError,
     atomic_file as atomic_file,
@@ -127,11 +127,11 @@ class Dataset(eqx.Module):
         d = None if deflection_mm is None else np.asarray(deflection_mm, float).reshape(n, 3) * 1e-3
         s = np.broadcast_to(np.asarray(sigma_mm, float), (n,)) * 1e-3
         return Dataset(
-            jnp.asarray(np.deg2rad(q)),
-            jnp.asarray(f),
-            jnp.asarray(m),
-            None if d is None else jnp.asarray(d),
-            jnp.asarray(s.copy()),
+            to_device(np.deg2rad(q)),
+            to_device(f),
+            to_device(m),
+            None if d is None else to_device(d),
+            to_device(s.copy()),
             tuple(str(i) for i in ids),
             source,
         )
