@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import to_device
 from .._io import Dataset
 from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
@@ -155,9 +156,9 @@ def _observations(robot: Robot, q, force, moment) -> tuple[np.ndarray, np.ndarra
     for s in range(0, len(qp), _CHUNK):
         obs, nominal = observe_jit(
             robot,
-            jnp.asarray(qp[s : s + _CHUNK]),
-            jnp.asarray(fp[s : s + _CHUNK]),
-            None if mp is None else jnp.asarray(mp[s : s + _CHUNK]),
+            to_device(qp[s : s + _CHUNK]),
+            to_device(fp[s : s + _CHUNK]),
+            None if mp is None else to_device(mp[s : s + _CHUNK]),
             "physical",
             None,
             None,
