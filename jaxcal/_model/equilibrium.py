@@ -35,6 +35,7 @@ from .._solution import RESULTS, result_of
 from .tree import TreeRobot
 from .tree_kinematics import marker_positions
 from .tree_statics import (
+    check_load,
     is_stable,
     potential,
     spring_compliance,
@@ -101,17 +102,6 @@ class Equilibrium(eqx.Module):
         return self.x[:6]
 
 
-def _check_shapes(q, force, moment):
-    if jnp.shape(q) != (6,):
-        raise ValueError(
-            f"q must have shape (6,) (one configuration; vmap for more), got {jnp.shape(q)}"
-        )
-    if jnp.shape(force) != (3,):
-        raise ValueError(f"force must have shape (3,), got {jnp.shape(force)}")
-    if moment is not None and jnp.shape(moment) != (3,):
-        raise ValueError(f"moment must have shape (3,) or be None, got {jnp.shape(moment)}")
-
-
 def _state(tree: TreeRobot, q, force, moment):
     # The balance, then whether it is a minimum (one forward pass per spring): the plain
     # iteration cannot settle on a saddle, the accelerated one can.
@@ -121,15 +111,17 @@ def _state(tree: TreeRobot, q, force, moment):
 
 
 def _inputs(robot: Robot, q, force, moment):
-    _check_shapes(q, force, moment)
-    dtype = jnp.result_type(q, robot.compliance)
-    q = jnp.asarray(q, dtype)
-    force = jnp.asarray(force, dtype)
-    moment = None if moment is None else jnp.asarray(moment, dtype)
     # The accelerated fixed point: it finds an equilibrium wherever one is stable, also
     # where the springs are soft enough to stall the plain iteration (which the fits
     # keep: `measured_deflections`); a saddle it settles on is flagged by `_state`.
     tree = dataclasses.replace(as_tree(robot), equilibrium_solver="accelerated")
+    if force is None:
+        raise ValueError("force must have shape (3,), got None")
+    check_load(tree, q, force, moment, 0)
+    dtype = jnp.result_type(q, robot.compliance)
+    q = jnp.asarray(q, dtype)
+    force = jnp.asarray(force, dtype)
+    moment = None if moment is None else jnp.asarray(moment, dtype)
     return tree, q, force, moment
 
 
