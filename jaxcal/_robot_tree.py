@@ -150,13 +150,13 @@ def springs_of(tree: TreeRobot, x: Float[Array, " ndof"]) -> Float[Array, "r 3"]
     order = spring_order(tree)
     if jnp.shape(x) != (order.size,):
         raise ValueError(f"x must have shape ({order.size},), got {jnp.shape(x)}")
-    full = jnp.zeros(3 * len(tree.elastic), x.dtype).at[jnp.asarray(order)].set(x)
+    full = jnp.zeros(3 * len(tree.elastic), x.dtype).at[order].set(x)
     return full.reshape(-1, 3)
 
 
 def spring_vector(tree: TreeRobot, phi: Float[Array, "r 3"]) -> Float[Array, " ndof"]:
     """The vector `x` of the tree's deflections `φ` (r, 3): `springs_of`'s inverse."""
-    return phi.reshape(-1)[jnp.asarray(spring_order(tree))]
+    return phi.reshape(-1)[spring_order(tree)]
 
 
 def _spring_site(effect) -> tuple[str, tuple[str, ...], Array] | None:

@@ -66,7 +66,6 @@ __all__ = [
     "spring_residual",
     "stable_balance",
     "is_stable",
-    "stop_gradients",
     "TreeEquilibrium",
     "tree_equilibrium",
     "tree_deflection",
