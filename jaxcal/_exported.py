@@ -16,6 +16,14 @@ the number of this process's devices and whether work is divided among them.
 A change of any of them stores a new program. It is on only while the compilation cache
 is (`enable_compilation_cache`), and a program that cannot be exported or read back is
 simply traced as without it.
+
+`brief_jit(fn)` is `eqx.filter_jit(fn)` for a brief program: one that runs once or a
+few times per command on a small batch of fixed size (the criteria of a candidate pool,
+the evaluation of a design's starts), so that its compile is all the user waits for.
+It is compiled with XLA's optimisation level 0, LLVM's expensive passes off and the
+loop emitters (`BRIEF_OPTIONS`), stored or not: a design's bound pool (512 rows) then
+compiles in 2.8 s instead of 4.8 s and runs in 0.1 s instead of 0.03 s. A program that
+iterates long (an optimiser, a fit) keeps XLA's defaults.
 """
 
 from __future__ import annotations
@@ -35,13 +43,48 @@ import numpy as np
 from ._batching import dividing_among_devices, to_device
 from ._io import atomic_file
 
-__all__ = ["export_directory", "exported", "set_export_directory"]
+__all__ = ["BRIEF_OPTIONS", "brief_jit", "export_directory", "exported", "set_export_directory"]
+
+#: XLA's compile options of a brief program (`brief_jit`): what
+#: `jax_disable_most_optimizations` sets, and the loop emitters, which compile faster
+#: than the fusion emitters on the CPU (other backends ignore the option).
+BRIEF_OPTIONS = {
+    "xla_backend_optimization_level": 0,
+    "xla_llvm_disable_expensive_passes": True,
+    "xla_cpu_use_fusion_emitters": False,
+}
 
 _DIR: Path | None = None
 _LOADED: dict[str, Any] = {}
 _KEYS: dict[tuple, str] = {}
 _UNEXPORTABLE = b"unexportable"
 _ARRAY = "<jaxcal exported array>"  # an output array's place in a stored skeleton
+# Each `brief_jit` program by id: its form without compile options, which `exported`
+# traces inside its own program (and which keeps the id from being taken).
+_BRIEF: dict[int, Callable] = {}
+
+
+def brief_jit(fn: Callable) -> Callable:
+    """`eqx.filter_jit(fn)` compiled with `BRIEF_OPTIONS`, also where `exported` stores
+    it: for a program whose compile takes longer than all its runs in a command. Called
+    inside a trace it is `eqx.filter_jit(fn)` (JAX takes compile options at the top
+    level only)."""
+    plain = eqx.filter_jit(fn)
+    # equinox passes `compiler_options` on to `jax.jit`; its overloads do not declare it
+    brief = eqx.filter_jit(fn, compiler_options=BRIEF_OPTIONS)  # pyright: ignore[reportCallIssue]
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        if _traced((args, kwargs)):
+            return plain(*args, **kwargs)
+        return brief(*args, **kwargs)
+
+    _BRIEF[id(call)] = plain
+    return call
+
+
+def _traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
 
 
 def export_directory() -> Path | None:
@@ -112,16 +155,19 @@ def exported(fn: Callable, tag: str = "") -> Callable:
     @functools.wraps(fn)
     def call(*args):
         leaves, treedef = jax.tree.flatten(args)
-        if _DIR is None or any(isinstance(x, jax.core.Tracer) for x in leaves):
+        if _DIR is None or _traced(leaves):
             return fn(*args)
         is_arr = [eqx.is_array(x) for x in leaves]
         arrays = [x for x, a in zip(leaves, is_arr, strict=True) if a]
         statics = [x for x, a in zip(leaves, is_arr, strict=True) if not a]
         key = _key(fn, tag, treedef, arrays, statics)
         name = getattr(fn, "__name__", "exported")
-        got = _LOADED.get(key) or _load(_DIR / f"{key}-cache", name)
+        options = BRIEF_OPTIONS if id(fn) in _BRIEF else None
+        got = _LOADED.get(key) or _load(_DIR / f"{key}-cache", name, options)
         if got is None:
-            got = _export(fn, treedef, leaves, is_arr, arrays, _DIR / f"{key}-cache", name)
+            path = _DIR / f"{key}-cache"
+            inner = _BRIEF.get(id(fn), fn)
+            got = _export(inner, treedef, leaves, is_arr, arrays, path, name, options)
         _LOADED[key] = got
         if got == _UNEXPORTABLE:
             return fn(*args)
@@ -161,7 +207,7 @@ def _placement(devices: int) -> Any:
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
 
-def _load(path: Path, name: str):
+def _load(path: Path, name: str, options: dict | None):
     try:
         data = path.read_bytes()
     except OSError:
@@ -173,12 +219,12 @@ def _load(path: Path, name: str):
         exp = jax.export.deserialize(bytearray(blob))
         if exp.nr_devices > jax.local_device_count():
             return None  # made for more devices than this process has: trace again
-        return _jit_named(exp.call, name), skeleton, _placement(exp.nr_devices)
+        return _jit_named(exp.call, name, options), skeleton, _placement(exp.nr_devices)
     except Exception:
         return None  # a stale or corrupt entry: export again
 
 
-def _export(fn, treedef, leaves, is_arr, arrays, path: Path, name: str):
+def _export(fn, treedef, leaves, is_arr, arrays, path: Path, name: str, options: dict | None):
     skeleton: list = []
 
     def flat(*xs):
@@ -204,15 +250,16 @@ def _export(fn, treedef, leaves, is_arr, arrays, path: Path, name: str):
         pass  # an unwritable cache is the compilation cache's warning to give
     if exp is None:
         return _UNEXPORTABLE
-    return _jit_named(exp.call, name), skeleton[0], _placement(exp.nr_devices)
+    return _jit_named(exp.call, name, options), skeleton[0], _placement(exp.nr_devices)
 
 
-def _jit_named(call: Callable, name: str) -> Callable:
+def _jit_named(call: Callable, name: str, options: dict | None) -> Callable:
     """`jax.jit(call)` under the stored function's name (`jax_log_compiles` and the
-    compile-time events then name the program, not `Exported.call`)."""
+    compile-time events then name the program, not `Exported.call`), with the stored
+    function's compile `options`."""
 
     def run(*args):
         return call(*args)
 
     run.__name__ = run.__qualname__ = name
-    return jax.jit(run)
+    return jax.jit(run, compiler_options=options)

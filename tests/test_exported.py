@@ -1,6 +1,8 @@
 """Traced programs kept on disk (`jaxcal/_exported.py`): the stored program gives the
 same results as the jitted function, a new process (simulated by forgetting what was
-loaded) reads it instead of tracing, and anything unusual falls back to plain jit."""
+loaded) reads it instead of tracing, and anything unusual falls back to plain jit.
+Brief programs (`brief_jit`) are compiled with their options, stored or not, and are
+plain jitted functions inside a trace."""
 
 import equinox as eqx
 import jax
@@ -8,7 +10,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxcal.internal import export_directory, exported, set_export_directory
+from jaxcal.internal import (
+    BRIEF_OPTIONS,
+    brief_jit,
+    export_directory,
+    exported,
+    set_export_directory,
+)
 
 TRACES = []
 
@@ -109,4 +117,44 @@ def test_off_and_under_transformations_it_is_the_plain_function(store):
     assert not list(store.glob("*-cache"))
     set_export_directory(None)
     f(z, jnp.asarray(2.0), 2)
+    assert not list(store.glob("*-cache"))
+
+
+def _g(z, w, power: int):
+    return Out(z**power * w + 1.0, jnp.sum(z), f"power {power}", None, z[-1])
+
+
+g = exported(brief_jit(_g))
+
+
+def test_brief_program_is_stored_and_gives_the_plain_results(store):
+    z, w = jnp.arange(4.0), jnp.asarray(0.5)
+    want = _f(z, w, 3)
+    for _ in range(2):  # traced and stored, then read back
+        got = g(z, w, 3)
+        np.testing.assert_allclose(np.asarray(got.value), np.asarray(want.value), rtol=1e-15)
+        assert got.label == "power 3" and got.absent is None
+        (entry,) = store.glob("*-cache")
+        # JAX refuses compile options on a jit nested in another: the brief program
+        # must be traced without them, or it is marked unexportable.
+        assert not entry.read_bytes().startswith(b"unexportable")
+        _forget(store)
+
+
+@pytest.mark.parametrize("stored", [True, False])
+def test_brief_options_reach_xla(store, monkeypatch, stored):
+    # XLA refuses an option it does not know: a compile that fails on one added to the
+    # options (before the program is made) is a compile that was given them.
+    monkeypatch.setitem(BRIEF_OPTIONS, "xla_jaxcal_no_such_option", True)
+    h = exported(brief_jit(_g))
+    if not stored:
+        set_export_directory(None)
+    with pytest.raises(Exception, match="xla_jaxcal_no_such_option"):
+        h(jnp.arange(7.0), jnp.asarray(0.5), 4)
+
+
+def test_brief_program_inside_a_trace_is_the_plain_function(store):
+    z = jnp.arange(3.0)
+    out = jax.jit(jax.vmap(lambda a: g(a, jnp.asarray(2.0), 2).value))(jnp.stack([z, z + 1]))
+    np.testing.assert_allclose(np.asarray(out[1]), np.asarray((z + 1) ** 2 * 2 + 1))
     assert not list(store.glob("*-cache"))

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._exported import exported
+from .._exported import brief_jit, exported
 from .._io import q2_groups
 from .._linalg.covariance import unidentifiable, well_conditioned
 from .._linalg.dense import cholesky, solve_lower
@@ -369,7 +369,7 @@ def share_of_trace(c: DesignCriteria) -> dict[str, float]:
 
 
 @exported
-@eqx.filter_jit
+@brief_jit
 def observe_jit(robot, q, force, moment, parameters, groups, n_groups, include_k1, model):
     """`design_observation` compiled, with every setting positional (host-side callers:
     `design_criteria`, the bound's candidate pool)."""

@@ -10,6 +10,8 @@ from .._batching import (
 )
 from .._cache import cache_info as cache_info, clear_cache as clear_cache
 from .._exported import (
+    BRIEF_OPTIONS as BRIEF_OPTIONS,
+    brief_jit as brief_jit,
     export_directory as export_directory,
     exported as exported,
     set_export_directory as set_export_directory,
