@@ -41,7 +41,7 @@ from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
 from ._bound import candidate_pool
-from ._criteria import observe_jit
+from ._criteria import observe_brief
 
 __all__ = ["Advice", "advise_measurements"]
 
@@ -154,7 +154,7 @@ def _observations(robot: Robot, q, force, moment) -> tuple[np.ndarray, np.ndarra
     mp = None if moment is None else np.concatenate([moment, np.repeat(moment[:1], pad, 0)])
     out, nominal = [], None
     for s in range(0, len(qp), _CHUNK):
-        obs, nominal = observe_jit(
+        obs, nominal = observe_brief(
             robot,
             to_device(qp[s : s + _CHUNK]),
             to_device(fp[s : s + _CHUNK]),

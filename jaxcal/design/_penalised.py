@@ -21,7 +21,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._batching import batch_map, to_device
-from .._exported import brief_jit, exported
+from .._exported import exported
 from ._bound import design_bound
 from ._constraints import constraint_values, design_bounds
 from ._problem import DesignProblem, log_value, problem_criteria
@@ -135,7 +135,7 @@ def minimise_batch(problem: DesignProblem, z0, weight, max_steps: int, rtol: flo
 
 
 @exported
-@brief_jit
+@eqx.filter_jit
 def evaluate_batch(problem: DesignProblem, z):
     # What the host needs to pick the best start: decoded angles, criteria, exact
     # constraint values and the level-gap violation.

@@ -21,11 +21,11 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._exported import brief_jit
 from .._io import Dataset, configurations
 from .._model.equilibrium import measured_deflections, with_unloaded
 from ._report import DiscoveryReport
@@ -86,7 +86,7 @@ def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray):
     design = (*with_unloaded(pool.q, pool.force, pool.moment, jnp.asarray(q_unique)), inv)
     if sm.key not in _PROGRAMS:
         one = functools.partial(_predictions_and_jacobian, sm.to_robot)
-        _PROGRAMS[sm.key] = brief_jit(jax.vmap(one, in_axes=(None, None, 0)))
+        _PROGRAMS[sm.key] = eqx.filter_jit(jax.vmap(one, in_axes=(None, None, 0)))
     y, ok, J = _PROGRAMS[sm.key](sm.robot, design, jnp.asarray(params))
     return np.asarray(y), np.asarray(ok), np.asarray(J)
 
