@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import to_device
+from .._batching import map_in_chunks, to_device
 from .._io import Dataset
 from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
@@ -146,27 +146,24 @@ def _finite(v: float) -> float | None:
 def _observations(robot: Robot, q, force, moment) -> tuple[np.ndarray, np.ndarray]:
     # Fixed-size chunks: the data's rows and the pool share one compiled program. Without
     # moments (`moment` None) the program is the design's own, which compiles in less
-    # than half the time of the one that takes a moment.
-    n = len(q)
-    pad = (-n) % _CHUNK
-    qp = np.concatenate([q, np.repeat(q[:1], pad, 0)])
-    fp = np.concatenate([force, np.repeat(force[:1], pad, 0)])
-    mp = None if moment is None else np.concatenate([moment, np.repeat(moment[:1], pad, 0)])
-    out, nominal = [], None
-    for s in range(0, len(qp), _CHUNK):
+    # than half the time of the one that takes a moment. The nominal values, the same
+    # for every row, ride along per row to be cut like the rows.
+    def one(qc, fc, mc):
         obs, nominal = observe_brief(
             robot,
-            to_device(qp[s : s + _CHUNK]),
-            to_device(fp[s : s + _CHUNK]),
-            None if mp is None else to_device(mp[s : s + _CHUNK]),
+            to_device(qc),
+            to_device(fc),
+            None if mc is None else to_device(mc),
             "physical",
             None,
             None,
             True,
             "full",
         )
-        out.append(np.asarray(obs))
-    return np.concatenate(out)[:n], np.asarray(nominal)
+        return obs, np.broadcast_to(np.asarray(nominal), (len(qc), *np.shape(nominal)))
+
+    obs, nominal = map_in_chunks(one, len(q), _CHUNK, q, force, moment)
+    return obs, nominal[0]
 
 
 @eqx.filter_jit
