@@ -18,7 +18,7 @@ import pytest
 import jaxcal
 from jaxcal import DesignProblem, design_bound, design_criteria, design_observation, random_designs
 from jaxcal.compensation import compensate_row, landing_error
-from jaxcal.internal import pool_values, problem_criteria
+from jaxcal.internal import pool_observations, pool_values, problem_criteria
 
 
 def _numpy_phi(robot, P, bound):
@@ -269,6 +269,39 @@ def test_aggregated_bound_is_below_a_design_in_its_pool(robot, relative):
     assert b.levels_deg is not None and len(b.levels_deg) == 3
     assert np.diff(sorted(b.levels_deg)).min() >= 20.0 - 1e-6
     assert 0 < b.efficiency(float(v[0])) <= 1.0
+
+
+def test_pool_nominal_values_do_not_depend_on_the_chunks(robot):
+    # The aggregated set's nominal values (joint-2 compliance at each level's q2) that
+    # scale the bound's relative criterion: the same whether the pool is observed in one
+    # chunk or in chunks that each hold only some of its levels (the last one padded).
+    P = DesignProblem(
+        robot, 12, groups=tuple(i % 3 for i in range(12)), model="linear", relative=True
+    )
+    levels_deg = np.array([-30.0, 0.0, 25.0, 60.0, 90.0])
+    level = np.repeat(np.arange(5), 10)
+    q = np.asarray(random_designs(robot, 1, 50, seed=1))[0]
+    q[:, 1] = np.deg2rad(levels_deg[level])
+    force = np.asarray(jaxcal.design_loads(robot, jnp.asarray(q)))
+    A1, nom1 = pool_observations(P, q, force, level, 5, chunk=64)
+    A2, nom2 = pool_observations(P, q, force, level, 5, chunk=16)
+    np.testing.assert_allclose(A2, A1, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(nom2, nom1, rtol=1e-12)
+    # One value per level, each the linear model's at that level's q2.
+    k2 = nom1[int(P.k1) : int(P.k1) + 5]
+    assert len(np.unique(k2)) == 5
+    for g in (0, 4):
+        _, alone = design_observation(
+            robot,
+            q[level == g][:1],
+            force[level == g][:1],
+            parameters="aggregated",
+            groups=np.zeros(1, int),
+            n_groups=1,
+            include_k1=P.k1,
+            model="linear",
+        )
+        assert k2[g] == pytest.approx(float(alone[int(P.k1)]), rel=1e-12)
 
 
 def test_fixed_q2_levels_in_designs_bound_and_random_starts(robot):

@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import to_device
+from .._batching import map_in_chunks, to_device
 from .._exported import exported
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
@@ -130,30 +130,39 @@ def candidate_pool(
     return q, force, level
 
 
-def _observe(robot, problem: DesignProblem, q, force, level, n_levels, chunk=512):
-    # In fixed-size chunks (one compiled program whatever the pool size); the last chunk
-    # padded with copies of the first candidate.
-    n = len(q)
-    pad = (-n) % chunk
-    qp = np.concatenate([q, np.repeat(q[:1], pad, 0)])
-    fp = np.concatenate([force, np.repeat(force[:1], pad, 0)])
-    lp = np.concatenate([level, np.repeat(level[:1], pad, 0)])
+def pool_observations(problem: DesignProblem, q, force, level, n_levels: int, chunk: int = 512):
+    """The observation matrices `(N, 3, p)` of candidates `q` (rad) under `force` (N) in
+    the problem's parameters (user units), and those parameters' nominal values `(p,)`;
+    `level`: each candidate's q2-level index (the aggregated set: one joint-2 compliance
+    per level, `n_levels` of them, each at its level's q2), ignored otherwise."""
+    # In fixed-size chunks (one compiled program whatever the pool size). A chunk's
+    # aggregated nominal values are right only for the levels it holds (an absent
+    # level's group has no mean q2), so each level's value is taken from a row of it.
     agg = problem.parameters == "aggregated"
-    out, nominal = [], None
-    for s in range(0, len(qp), chunk):
+
+    def one(qc, fc, lc):
         obs, nominal = observe_jit(
             problem.robot,
-            to_device(qp[s : s + chunk]),
-            to_device(fp[s : s + chunk]),
+            to_device(qc),
+            to_device(fc),
             None,
             problem.parameters,
-            to_device(lp[s : s + chunk]) if agg else None,
+            None if lc is None else to_device(lc),
             n_levels if agg else None,
             problem.k1,
             problem.obs_model,
         )
-        out.append(np.asarray(obs))
-    return np.concatenate(out)[:n], np.asarray(nominal)
+        return obs, np.broadcast_to(np.asarray(nominal), (len(qc), *np.shape(nominal)))
+
+    A, per_row = map_in_chunks(one, len(q), chunk, q, force, level if agg else None)
+    nominal = per_row[0].copy()
+    if agg:
+        k1 = int(problem.k1)
+        for g in range(n_levels):
+            rows = np.flatnonzero(level == g)
+            if rows.size:
+                nominal[k1 + g] = per_row[rows[0], k1 + g]
+    return A, nominal
 
 
 def _stats(A, mask, Wm, sigma2, criterion, w):
@@ -270,7 +279,7 @@ def design_bound(
             linc = -np.ones(len(inc), int)
         q, force, level = (np.concatenate(a) for a in ((q, inc), (force, finc), (level, linc)))
     n_levels = 0 if levels is None else len(levels)
-    A, nominal = _observe(robot, problem, q, force, level, n_levels)
+    A, nominal = pool_observations(problem, q, force, level, n_levels)
     k1 = int(problem.k1)
     if agg:
         G = problem.n_groups

@@ -63,6 +63,7 @@ from .._model.tree_statics import (
 from .._robot import URAD as URAD, G as G
 from .._solution import NAMES as NAMES, messages as messages
 from ..compensation._tree import robot_covariance as robot_covariance, tree_rows as tree_rows
+from ..design._bound import pool_observations as pool_observations
 from ..design._criteria import criteria_from_observation as criteria_from_observation
 from ..design._observation import screw_jacobian as screw_jacobian
 from ..design._pool_bound import pool_bound as pool_bound
