@@ -79,25 +79,28 @@ def default_pool(sm: SuperModel, data: Dataset, n: int = 400, seed: int = 0) -> 
 _PROGRAMS: dict = {}
 
 
-def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray):
+def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray, columns: np.ndarray):
     """Predictions (B, m, 3) m of `pool` at each parameter vector and their Jacobian
-    (B, m, 3, P) in every parameter, by forward mode through the equilibria."""
+    (B, m, 3, C) in the parameters `columns` (C of them, the others held), by forward
+    mode through the equilibria: one tangent per column, so only the columns a
+    comparison uses are pushed through the pool's equilibria."""
     q_unique, inv = configurations(pool.q)
     design = (*with_unloaded(pool.q, pool.force, pool.moment, jnp.asarray(q_unique)), inv)
     if sm.key not in _PROGRAMS:
         one = functools.partial(_predictions_and_jacobian, sm.to_robot)
-        _PROGRAMS[sm.key] = eqx.filter_jit(jax.vmap(one, in_axes=(None, None, 0)))
-    y, ok, J = _PROGRAMS[sm.key](sm.robot, design, jnp.asarray(params))
+        _PROGRAMS[sm.key] = eqx.filter_jit(jax.vmap(one, in_axes=(None, None, 0, None)))
+    y, ok, J = _PROGRAMS[sm.key](sm.robot, design, jnp.asarray(params), jnp.asarray(columns))
     return np.asarray(y), np.asarray(ok), np.asarray(J)
 
 
-def _predictions_and_jacobian(to_robot, robot, design, p):
-    def model(p):
+def _predictions_and_jacobian(to_robot, robot, design, p, columns):
+    def model(sub):
         q_all, f_all, m_all, inverse = design
-        dp, ok = measured_deflections(to_robot(p, robot), q_all, f_all, m_all, jnp.asarray(inverse))
+        robot_p = to_robot(p.at[columns].set(sub), robot)
+        dp, ok = measured_deflections(robot_p, q_all, f_all, m_all, jnp.asarray(inverse))
         return dp, (dp, ok)
 
-    J, (dp, ok) = jax.jacfwd(model, has_aux=True)(p)
+    J, (dp, ok) = jax.jacfwd(model, has_aux=True)(p[columns])
     return dp, ok, J
 
 
@@ -126,12 +129,18 @@ def discriminating_rows(
     d_data = ((rb - ra) / sig_d).reshape(-1)
     jac = sm.jacobian(np.stack([pa, pb]), np.stack([data.sigma, data.sigma]))
     Ja_d, Jb_d = jac[0][:, fa], jac[1][:, fb]
-    y, ok, J = _model_and_jacobian(sm, pool, np.stack([pa, pb]))
+    # The pool's Jacobian in the parameters either fit frees, at each fit's values.
+    cols = np.flatnonzero(fa | fb)
+    y, ok, J = _model_and_jacobian(sm, pool, np.stack([pa, pb]), cols)
+    at_a, at_b = (
+        np.searchsorted(cols, np.flatnonzero(fa)),
+        np.searchsorted(cols, np.flatnonzero(fb)),
+    )
     usable = ok[0] & ok[1]
     # Rows whose equilibria failed are never chosen; zeros keep them out of the sums.
     d_pool = np.where(usable[:, None], (y[0] - y[1]) / sig_p, 0.0)  # (m, 3)
-    Ja_p = np.where(usable[:, None, None], J[0][..., fa] / sig_p[..., None], 0.0)
-    Jb_p = np.where(usable[:, None, None], J[1][..., fb] / sig_p[..., None], 0.0)
+    Ja_p = np.where(usable[:, None, None], J[0][..., at_a] / sig_p[..., None], 0.0)
+    Jb_p = np.where(usable[:, None, None], J[1][..., at_b] / sig_p[..., None], 0.0)
     # B refitted to A's predictions, and A to B's: the data's rows and the chosen ones.
     idx, t_before, t_after = greedy_t_rows(
         (lack_of_fit(Jb_d, d_data, Jb_p, d_pool), lack_of_fit(Ja_d, -d_data, Ja_p, -d_pool)),
