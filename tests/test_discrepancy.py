@@ -525,6 +525,19 @@ def test_heldout_matches_refitting_without_each_configuration(dead_band):
     assert np.all(err < 0.25), np.round(err, 3)
 
 
+def test_predictions_equal_the_model_the_fit_left(dead_band):
+    # `predict` runs a program of its own (no Jacobian): at the fitted parameters it gives
+    # the model of the fit program (target − residuals) to the equilibria's tolerance
+    # (1e-12 rad times arms of a few metres), and each vector's the same in any batch.
+    sm, _, _, fit, target, _, _ = dead_band
+    dp, ok = sm.predict(np.stack([sm.start, fit.params[0], sm.start]))
+    assert ok.all()
+    np.testing.assert_allclose(dp[1], target[0] - fit.residuals[0], rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(dp[0], dp[2])
+    alone, _ = sm.predict(fit.params[0])
+    np.testing.assert_allclose(alone[0], dp[1], rtol=0, atol=1e-15)
+
+
 def test_preload_scan_only_for_joint_two_with_compensator(dead_band, robot):
     from jaxcal import SuperModel
     from jaxcal.internal import preload_scan

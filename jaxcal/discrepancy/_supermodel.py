@@ -53,6 +53,10 @@ def chunk_size() -> int:
 
 
 _COMPILED: dict = {}
+_PREDICT: dict = {}
+#: Parameter vectors per call of the prediction program (`SuperModel.predict`): a
+#: preload scan predicts a few hundred.
+PREDICT_CHUNK = 32
 #: Candidate-parameter slots of one fit: the most parameters a candidate has (tracker 3).
 SLOTS = 3
 #: LM tolerances on the scaled parameters u = Δp/scale (O(1)), as in `jaxcal._identification.lsq`: a
@@ -189,6 +193,16 @@ class SuperModel:
             _COMPILED[self._key] = exported(eqx.filter_jit(self._batched), tag=repr(self._key))
         return _COMPILED[self._key]
 
+    def _predictions(self, robot, design, P):
+        return jax.vmap(self._predict, in_axes=(None, None, 0))(robot, design, P)
+
+    def _predict_compiled(self):
+        # A program of its own: through the fit program (with LM told to stop at its
+        # start) a prediction also paid for the Jacobian in every fitted parameter.
+        if self._key not in _PREDICT:
+            _PREDICT[self._key] = exported(eqx.filter_jit(self._predictions), tag=repr(self._key))
+        return _PREDICT[self._key]
+
     def _one(self, model: _Model, trial: _Trial, fit, max_steps):
         """One fit (or, with `fit` False, one evaluation) of u = (nominal parameters,
         the `SLOTS` parameters at indices `trial.sel`), `trial.mask` marking which move.
@@ -292,16 +306,14 @@ class SuperModel:
     def predict(self, params) -> tuple[np.ndarray, np.ndarray]:
         """Model deflections (B, n, 3) m and flags (B,) for parameter vectors (B, P)."""
         params = np.atleast_2d(np.asarray(params, float))
-        B, nn = params.shape[0], self.n_nominal
-        out = self._call(
+        fn = self._predict_compiled()
+        dp, ok = map_in_chunks(
+            lambda P: fn(self.robot, self.design, jnp.asarray(P)),
+            params.shape[0],
+            PREDICT_CHUNK,
             params,
-            self._default_sel(B),
-            np.zeros((B, nn + SLOTS)),
-            np.zeros((B, self.n, 3)),
-            np.ones((B, self.n)),
-            fit=False,
         )
-        return -out.residuals, out.valid
+        return dp, np.all(ok, axis=1) & np.all(np.isfinite(dp), axis=(1, 2))
 
     def jacobian(self, params, sigma) -> np.ndarray:
         """σ-weighted Jacobian of the model w.r.t. *every* parameter, (B, 3n, P), at
