@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._exported import exported
 from .._io import Dataset, configurations
 from .._model.equilibrium import measured_deflections, with_unloaded
 from ._report import DiscoveryReport
@@ -88,7 +89,12 @@ def _model_and_jacobian(sm: SuperModel, pool: Dataset, params: np.ndarray, colum
     design = (*with_unloaded(pool.q, pool.force, pool.moment, jnp.asarray(q_unique)), inv)
     if sm.key not in _PROGRAMS:
         one = functools.partial(_predictions_and_jacobian, sm.to_robot)
-        _PROGRAMS[sm.key] = eqx.filter_jit(jax.vmap(one, in_axes=(None, None, 0, None)))
+
+        def pool_jacobian(robot, design, params, columns):
+            return jax.vmap(one, in_axes=(None, None, 0, None))(robot, design, params, columns)
+
+        # Stored (`exported`): a warm command loads it instead of tracing it again.
+        _PROGRAMS[sm.key] = exported(eqx.filter_jit(pool_jacobian), tag=repr(sm.key))
     y, ok, J = _PROGRAMS[sm.key](sm.robot, design, jnp.asarray(params), jnp.asarray(columns))
     return np.asarray(y), np.asarray(ok), np.asarray(J)
 
