@@ -35,13 +35,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import map_in_chunks, to_device
 from .._io import Dataset
 from .._linalg.covariance import covariance_from_jacobian
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
 from ._bound import candidate_pool
-from ._criteria import observe_brief
+from ._observation import observe_rows
 
 __all__ = ["Advice", "advise_measurements"]
 
@@ -146,24 +145,8 @@ def _finite(v: float) -> float | None:
 def _observations(robot: Robot, q, force, moment) -> tuple[np.ndarray, np.ndarray]:
     # Fixed-size chunks: the data's rows and the pool share one compiled program. Without
     # moments (`moment` None) the program is the design's own, which compiles in less
-    # than half the time of the one that takes a moment. The nominal values, the same
-    # for every row, ride along per row to be cut like the rows.
-    def one(qc, fc, mc):
-        obs, nominal = observe_brief(
-            robot,
-            to_device(qc),
-            to_device(fc),
-            None if mc is None else to_device(mc),
-            "physical",
-            None,
-            None,
-            True,
-            "full",
-        )
-        return obs, np.broadcast_to(np.asarray(nominal), (len(qc), *np.shape(nominal)))
-
-    obs, nominal = map_in_chunks(one, len(q), _CHUNK, q, force, moment)
-    return obs, nominal[0]
+    # than half the time of the one that takes a moment.
+    return observe_rows(robot, q, force, moment, True, "full", chunk=_CHUNK, brief=True)
 
 
 @eqx.filter_jit

@@ -50,7 +50,7 @@ from .._exported import exported
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
 from ._constraints import design_bounds, design_loads, horizontal_loads
-from ._criteria import observe_jit
+from ._observation import observe_jit
 from ._parameter_sets import select_parameters
 from ._plans import feasible_q3_range, random_designs
 from ._problem import DesignProblem

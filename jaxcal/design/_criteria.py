@@ -39,7 +39,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._exported import brief_jit, exported
 from .._io import q2_groups
 from .._linalg.covariance import unidentifiable, well_conditioned
 from .._linalg.dense import cholesky, solve_lower
@@ -51,6 +50,7 @@ from ._observation import (
     check_parameter_set,
     design_observation,
     design_parameter_names,
+    observe_jit,
 )
 from ._parameter_sets import (
     default_relative,
@@ -70,8 +70,6 @@ __all__ = [
     "criteria_from_observation",
     "host_criteria",
     "share_of_trace",
-    "observe_brief",
-    "observe_jit",
 ]
 
 CRITERIA: tuple[str, ...] = ("trace", "det", "weighted", "task")
@@ -367,27 +365,3 @@ def share_of_trace(c: DesignCriteria) -> dict[str, float]:
         var = np.where(keep, var, 0.0)
     total = var.sum()
     return {n: float(v / total) for n, v in zip(c.names, var, strict=True)}
-
-
-def _observe(robot, q, force, moment, parameters, groups, n_groups, include_k1, model):
-    return design_observation(
-        robot,
-        q,
-        force,
-        moment,
-        parameters=parameters,
-        groups=groups,
-        n_groups=n_groups,
-        include_k1=include_k1,
-        model=model,
-    )
-
-
-#: `design_observation` compiled, with every setting positional (host-side callers:
-#: `design_criteria`, the bound's candidate pool).
-observe_jit = exported(eqx.filter_jit(_observe))
-#: The same as a brief program (`brief_jit`), for a caller that waits for its compile
-#: and runs it once (the advice's candidates). The design's bound keeps `observe_jit`:
-#: it compiles on a worker thread beside the optimiser, where a brief program saved no
-#: wall time in a cold `jaxcal design` and cost 0.5 s in a warm one.
-observe_brief = exported(brief_jit(_observe))

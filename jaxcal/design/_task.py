@@ -27,14 +27,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._batching import rows_per_call
 from .._io import Dataset
 from .._robot import Robot
 from ._criteria import (
     criteria_from_observation,
     design_parameter_names,
     host_criteria,
-    observe_jit,
 )
+from ._observation import observe_rows
 from ._parameter_sets import k1_identifiable
 
 __all__ = [
@@ -126,10 +127,9 @@ def task_weight(robot: Robot, task: Dataset, include_k1: bool, model: str = "ful
 def observe_physical(robot, q, force, moment, include_k1: bool, model: str):
     """Host-side: observation matrices `(m, 3, p)` and nominal values of the physical
     parameters at rows `q` (rad) with loads `force`, `moment` (N, N·m; `moment` may be
-    None), as the task criterion and the pool selection use them."""
-    return observe_jit(
-        robot, jnp.asarray(q), jnp.asarray(force), moment, "physical", None, None, include_k1, model
-    )
+    None), as the task criterion and the pool selection use them: one compiled program
+    whatever the number of rows (a task's, a design's, a pool's)."""
+    return observe_rows(robot, q, force, moment, include_k1, model, chunk=rows_per_call())
 
 
 def task_prediction(
@@ -159,7 +159,9 @@ def task_prediction(
     cols = np.asarray(kept)
     names = tuple(all_names[i] for i in kept)
     obs, nominal = observe_physical(robot, *design, True, model)
-    crit = host_criteria(obs[:, :, cols], nominal[cols], sig, names=names, relative=False)
+    crit = host_criteria(
+        jnp.asarray(obs[:, :, cols]), jnp.asarray(nominal[cols]), sig, names=names, relative=False
+    )
     # The task's sensitivity to every physical parameter: one the design leaves out (k1)
     # or cannot determine, and the task needs, makes the prediction unbounded.
     t_obs, _ = observe_physical(robot, *task, True, model)
