@@ -45,12 +45,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import map_in_chunks, to_device
+from .._batching import to_device
 from .._exported import exported
 from .._linalg.dense import cho_solve, cholesky
 from .._robot import Robot
 from ._constraints import design_bounds, design_loads, horizontal_loads
-from ._observation import observe_jit
+from ._observation import observe_rows
 from ._parameter_sets import select_parameters
 from ._plans import feasible_q3_range, random_designs
 from ._problem import DesignProblem
@@ -134,35 +134,21 @@ def pool_observations(problem: DesignProblem, q, force, level, n_levels: int, ch
     """The observation matrices `(N, 3, p)` of candidates `q` (rad) under `force` (N) in
     the problem's parameters (user units), and those parameters' nominal values `(p,)`;
     `level`: each candidate's q2-level index (the aggregated set: one joint-2 compliance
-    per level, `n_levels` of them, each at its level's q2), ignored otherwise."""
-    # In fixed-size chunks (one compiled program whatever the pool size). A chunk's
-    # aggregated nominal values are right only for the levels it holds (an absent
-    # level's group has no mean q2), so each level's value is taken from a row of it.
+    per level, `n_levels` of them, each at its level's q2), ignored otherwise. In chunks
+    of `chunk` rows: one compiled program whatever the pool size."""
     agg = problem.parameters == "aggregated"
-
-    def one(qc, fc, lc):
-        obs, nominal = observe_jit(
-            problem.robot,
-            to_device(qc),
-            to_device(fc),
-            None,
-            problem.parameters,
-            None if lc is None else to_device(lc),
-            n_levels if agg else None,
-            problem.k1,
-            problem.obs_model,
-        )
-        return obs, np.broadcast_to(np.asarray(nominal), (len(qc), *np.shape(nominal)))
-
-    A, per_row = map_in_chunks(one, len(q), chunk, q, force, level if agg else None)
-    nominal = per_row[0].copy()
-    if agg:
-        k1 = int(problem.k1)
-        for g in range(n_levels):
-            rows = np.flatnonzero(level == g)
-            if rows.size:
-                nominal[k1 + g] = per_row[rows[0], k1 + g]
-    return A, nominal
+    return observe_rows(
+        problem.robot,
+        q,
+        force,
+        None,
+        problem.k1,
+        problem.obs_model,
+        chunk=chunk,
+        parameters=problem.parameters,
+        groups=level if agg else None,
+        n_groups=n_levels if agg else None,
+    )
 
 
 def _stats(A, mask, Wm, sigma2, criterion, w):

@@ -306,29 +306,44 @@ def observe_rows(
     model: str,
     *,
     chunk: int,
+    parameters: str = "physical",
+    groups=None,
+    n_groups: int | None = None,
     brief: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Host-side: the physical parameters' observation matrices `(m, 3, p)` at rows `q`
-    (rad) under `force`, `moment` (N, N·m; `moment` may be None) and their nominal values
+    """Host-side: the observation matrices `(m, 3, p)` of `parameters` at rows `q` (rad)
+    under `force`, `moment` (N, N·m; `moment` may be None) and their nominal values
     `(p,)`, in calls of `chunk` rows: one compiled program whatever the number of rows
-    (the last call padded). `brief`: `observe_brief`'s program (compiled for a caller
-    that runs it once), else `observe_jit`'s."""
+    (the last call padded). The aggregated set takes each row's q2 group in `groups`
+    (`n_groups` of them, each group's rows at one q2). `brief`: `observe_brief`'s
+    program (compiled for a caller that runs it once), else `observe_jit`'s."""
     program = observe_brief if brief else observe_jit
+    agg = parameters == "aggregated"
 
-    def one(qc, fc, mc):
+    def one(qc, fc, mc, gc):
         obs, nominal = program(
             robot,
             to_device(qc),
             to_device(fc),
             None if mc is None else to_device(mc),
-            "physical",
-            None,
-            None,
+            parameters,
+            None if gc is None else to_device(gc),
+            n_groups if agg else None,
             include_k1,
             model,
         )
-        # the nominal values, the same for every row, ride along per row to be cut
+        # the nominal values ride along per row, to be cut like the rows
         return obs, np.broadcast_to(np.asarray(nominal), (len(qc), *np.shape(nominal)))
 
-    obs, nominal = map_in_chunks(one, len(q), chunk, q, force, moment)
-    return obs, nominal[0]
+    g = np.asarray(groups) if agg else None
+    obs, per_row = map_in_chunks(one, len(q), chunk, q, force, moment, g)
+    nominal = per_row[0].copy()
+    if agg:
+        # A chunk's aggregated values are right only for the groups it holds (an absent
+        # group has no mean q2): each group's value is taken from a row of it.
+        k1 = int(include_k1)
+        for j in range(n_groups or 0):
+            rows = np.flatnonzero(g == j)
+            if rows.size:
+                nominal[k1 + j] = per_row[rows[0], k1 + j]
+    return obs, nominal
