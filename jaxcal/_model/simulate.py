@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._batching import map_in_chunks, rows_per_call
 from .._format import row_list
 from .._io import Dataset
 from .._robot import Robot
@@ -40,7 +41,20 @@ def model_deflections(
     equilibrium did not converge; with `throw=False` returns `(deflections, ok)`.
     """
     moment = data.moment if data.has_moments else None
-    dp, ok = batch_deflections(robot, data.q, data.force, moment)
+    # In calls of a fixed number of rows, so that one compiled program serves data sets
+    # of every size; each row is solved alone in the vmap, so the padding changes none.
+    if len(data.q):
+        dp, ok = map_in_chunks(
+            lambda q, f, m: batch_deflections(robot, q, f, m),
+            len(data.q),
+            rows_per_call(),
+            data.q,
+            data.force,
+            moment,
+        )
+        dp, ok = jnp.asarray(dp), jnp.asarray(ok)
+    else:
+        dp, ok = batch_deflections(robot, data.q, data.force, moment)
     if not throw:
         return dp, ok
     bad = np.flatnonzero(~np.asarray(ok))
