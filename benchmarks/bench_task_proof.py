@@ -24,7 +24,7 @@ others with its standard error (delta method, trials paired by seed).
 
 `tests/test_design_bound.py::test_task_design_proven_by_repeated_experiments` runs the
 first 200 trials of this study at every 4th path row, with the task design of the linear
-model (`--model linear`, whose programs compile in a fifth of the full model's time), and
+model (`--model linear`, whose programs compile in a sixth of the full model's time), and
 asserts that it is better than both others beyond 3 standard errors; this script gives
 the full model's design and the size of its gain.
 

@@ -401,7 +401,7 @@ def _machining_path(n=200):
 def task_design(robot, optimisations, tmp_path_factory):
     # `jaxcal design --configs 12 --criterion task --task PATH.csv --model linear -o
     # DESIGN.csv`: its table and the design it writes. On the linear model, whose
-    # programs compile in a fifth of the full model's time (the full model's task design,
+    # programs compile in a sixth of the full model's time (the full model's task design,
     # 0.99 efficient, is `benchmarks/bench_task_proof.py`'s).
     from jaxcal.internal.cli import main
 
