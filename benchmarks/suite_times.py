@@ -6,8 +6,8 @@ A pytest plugin. Run: `PYTHONPATH=benchmarks .venv/bin/python -m pytest -p suite
 `suite-times-<worker>.json` in `$SUITE_TIMES_DIR` (default: the current directory), and
 `python benchmarks/suite_times.py [DIR]` prints the totals, the files and the tests
 that take longest, and the programs whose compiles took longest (with how often each
-was compiled). Subprocesses (notebook kernels, the command line run as a process) are
-counted as run time of their test.
+was compiled, and in which tests). Subprocesses (notebook kernels, the command line run
+as a process) are counted as run time of their test.
 """
 
 from __future__ import annotations
@@ -34,6 +34,8 @@ _times: dict = collections.defaultdict(lambda: collections.defaultdict(float))
 # many times is a program whose shapes or static arguments change from call to call
 # (the compiles include hits of the persistent cache: its lookup is inside the event).
 _programs: dict = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
+# Per program name and test: [compiles, compile seconds] (where the compiles happen).
+_compiled_in: dict = collections.defaultdict(lambda: collections.defaultdict(lambda: [0, 0.0]))
 
 
 def _listener(event: str, duration: float, fun_name: str = "?", **_) -> None:
@@ -49,6 +51,10 @@ def _listener(event: str, duration: float, fun_name: str = "?", **_) -> None:
         at = 0 if kind == "compile" else 2
         entry[at] += 1
         entry[at + 1] += duration
+        if kind == "compile":
+            where = _compiled_in[fun_name][_current[0]]
+            where[0] += 1
+            where[1] += duration
 
 
 def pytest_configure(config):
@@ -74,11 +80,18 @@ def pytest_sessionfinish(session):
         json.dump({k: dict(v) for k, v in _times.items()}, f)
     with open(out.replace("suite-times-", "suite-programs-"), "w") as f:
         json.dump(dict(_programs), f)
+    with open(out.replace("suite-times-", "suite-compiled-in-"), "w") as f:
+        json.dump({k: dict(v) for k, v in _compiled_in.items()}, f)
 
 
 def _report(directory: str) -> None:
     tests: dict = {}
     programs: dict = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
+    compiled_in: dict = collections.defaultdict(dict)
+    for path in glob.glob(os.path.join(directory, "suite-compiled-in-*.json")):
+        with open(path) as f:
+            for name, where in json.load(f).items():
+                compiled_in[name].update(where)
     for path in glob.glob(os.path.join(directory, "suite-programs-*.json")):
         with open(path) as f:
             for name, entry in json.load(f).items():
@@ -104,6 +117,11 @@ def _report(directory: str) -> None:
     print("\nprograms by compile time (compiles, compile s, traces, trace s):")
     for name, (n, t, m, u) in sorted(programs.items(), key=lambda kv: -kv[1][1])[:30]:
         print(f"{n:5d} {t:7.1f} s  {m:5d} {u:7.1f} s  {name}")
+    print("\nwhere the 10 costliest programs compile (compiles, compile s, test):")
+    for name, _ in sorted(programs.items(), key=lambda kv: -kv[1][1])[:10]:
+        print(f"  {name}")
+        for test, (n, t) in sorted(compiled_in[name].items(), key=lambda kv: -kv[1][1])[:8]:
+            print(f"    {n:3d} {t:6.1f} s  {test}")
 
 
 if __name__ == "__main__":
