@@ -154,7 +154,9 @@ def _doubled_plus_one(x):
     return 2.0 * x + 1.0
 
 
-def test_a_second_command_keeps_the_programs_already_loaded(compiled):
+def test_a_second_command_keeps_the_programs_already_loaded(
+    compiled, monkeypatch, tmp_path, request
+):
     # Each command turns the cache on (`jaxcal.internal.cli.main`); in one process (a
     # notebook, the tests) the second finds it on in the same directory, and the stored
     # programs it has loaded stay loaded: not read, lowered and fetched again.
@@ -163,6 +165,11 @@ def test_a_second_command_keeps_the_programs_already_loaded(compiled):
 
     from jaxcal.internal import exported
 
+    if jaxcal.cache_dir() is None:
+        # The run's cache is off (JAXCAL_CACHE_DIR=off): a directory of this test's,
+        # off again after it.
+        monkeypatch.setenv("JAXCAL_CACHE_DIR", str(tmp_path))
+        request.addfinalizer(jaxcal.disable_compilation_cache)
     f = exported(eqx.filter_jit(_doubled_plus_one))
     x = jnp.arange(3.0)
     target = jaxcal.enable_compilation_cache()  # the test run's own directory
