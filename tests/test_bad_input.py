@@ -253,8 +253,8 @@ def test_gross_errors_are_named_over_seeds(example_data, n_gross, optimised_test
     """A 5 mm error (250 σ) in 1 or 3 rows at random positions, 10 seeds each: exactly
     those rows are named and excluded, and the estimates are those of clean data
     (within 1 std: dropping 1-3 of 48 rows moves them by far less). Compiled with
-    LLVM's optimisations: some 50 nonlinear fits run longer than they compile (alone,
-    38.5 s with them off, 19.5 s on)."""
+    LLVM's optimisations: the seeds' dozens of nonlinear fits run longer than they
+    compile (the two tests alone: 38.5 s with them off, 19.5 s on)."""
     robot, data = example_data
     clean = jaxcal.identify(robot, data, "nonlinear")
     assert clean.gross_rows == ()
