@@ -114,11 +114,12 @@ def _report(directory: str) -> None:
         print(f"\nslowest {label}:")
         for name, t in sorted(group.items(), key=lambda kv: -kv[1].get("wall", 0.0))[:15]:
             print(line(name, t))
+    ranked = sorted(programs.items(), key=lambda kv: -kv[1][1])
     print("\nprograms by compile time (compiles, compile s, traces, trace s):")
-    for name, (n, t, m, u) in sorted(programs.items(), key=lambda kv: -kv[1][1])[:30]:
+    for name, (n, t, m, u) in ranked[:30]:
         print(f"{n:5d} {t:7.1f} s  {m:5d} {u:7.1f} s  {name}")
     print("\nwhere the 10 costliest programs compile (compiles, compile s, test):")
-    for name, _ in sorted(programs.items(), key=lambda kv: -kv[1][1])[:10]:
+    for name, _ in ranked[:10]:
         print(f"  {name}")
         for test, (n, t) in sorted(compiled_in[name].items(), key=lambda kv: -kv[1][1])[:8]:
             print(f"    {n:3d} {t:6.1f} s  {test}")

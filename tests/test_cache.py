@@ -172,7 +172,7 @@ def test_a_second_command_keeps_the_programs_already_loaded(
         request.addfinalizer(jaxcal.disable_compilation_cache)
     f = exported(eqx.filter_jit(_doubled_plus_one))
     x = jnp.arange(3.0)
-    target = jaxcal.enable_compilation_cache()  # the test run's own directory
+    target = jaxcal.enable_compilation_cache()  # the test run's directory, or the test's
     assert target is not None
     f(x)
     assert jaxcal.enable_compilation_cache() == target
