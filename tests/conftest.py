@@ -213,6 +213,26 @@ def optimised_test():
         yield
 
 
+# JAX's in-memory caches do not key on the setting: a program that a test file before
+# in the same worker compiled without the optimisations is reused as it is. A context
+# of the jit key keeps a test's own programs apart, set for every thread.
+_OWN_PROGRAMS = jax.make_user_context(default_value=False)
+
+
+@pytest.fixture
+def optimised_own_programs():
+    """As `optimised_test`, for a test whose programs this worker may have compiled
+    before without the optimisations (common ones, such as the 48-row nonlinear fit),
+    which would then run as they are: its programs are compiled anew, with them."""
+    before = _OWN_PROGRAMS.get_global()
+    _OWN_PROGRAMS.set_global(True)
+    try:
+        with _optimisations_on():
+            yield
+    finally:
+        _OWN_PROGRAMS.set_global(before)
+
+
 @contextlib.contextmanager
 def _compiled(caplog):
     names: list[str] = []

@@ -249,7 +249,7 @@ def example_data(data_dir):
 
 
 @pytest.mark.parametrize("n_gross", [1, 3])
-def test_gross_errors_are_named_over_seeds(example_data, n_gross, optimised_test):
+def test_gross_errors_are_named_over_seeds(example_data, n_gross, optimised_own_programs):
     """A 5 mm error (250 σ) in 1 or 3 rows at random positions, 10 seeds each: exactly
     those rows are named and excluded, and the estimates are those of clean data
     (within 1 std: dropping 1-3 of 48 rows moves them by far less). Compiled with
