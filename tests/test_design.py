@@ -242,55 +242,60 @@ def test_structured_and_paper_plans(robot):
 
 @pytest.fixture(scope="module")
 def optimised(robot):
-    # The default problem (physical set linearised from the full model, relative trace,
-    # vertical loads, k1 excluded), started from the best 4 of the 200 random feasible
-    # designs it is compared with (seed 0: the `designs` fixture).
+    # The physical set (relative trace, vertical loads, k1 excluded) on the linear model,
+    # started from the best 4 of the 200 random feasible designs it is compared with
+    # (seed 0: the `designs` fixture). The same problem on the full model (1.2053, reached
+    # by these settings) takes minutes to compile and run: `benchmarks/bench_design.py`,
+    # its second part; the optimiser's program on the full model is the default design's
+    # (tests/test_design_bound.py).
     # The physical set spends its trace on Kc, which it cannot determine: a warning says so.
-    with pytest.warns(UserWarning, match=r"Kc: 9\d % of the trace"):
-        return optimise_design(
+    with pytest.warns(UserWarning, match=r"Kc: (\d+) % of the trace") as record:
+        d = optimise_design(
             robot,
             12,
             parameters="physical",
+            model="linear",
             max_steps=150,
             starts=4,
             pool=200,
             seed=0,
             bound_pool=0,
         )
+    (warned,) = [str(w.message) for w in record if "of the trace" in str(w.message)]
+    return d, warned
 
 
 def test_optimised_design_is_feasible_and_beats_random(robot, designs, optimised):
     from jaxcal.internal import pool_values
 
-    d = optimised
-    assert d.feasible and d.model == "full"
+    d, warned = optimised
+    assert d.feasible and d.model == "linear"
     cv = np.asarray(constraint_values(robot, jnp.asarray(d.q)))
     assert cv.max() <= 0
-    # The reference: the best of the 200 random designs under the same (full-model)
-    # criterion, the best one re-evaluated through `design_criteria`'s own path.
-    P = DesignProblem(robot, 12, parameters="physical")
+    # The reference: the best of the 200 random designs under the same criterion, the
+    # best one re-evaluated through `design_criteria`'s own path.
+    P = DesignProblem(robot, 12, parameters="physical", model="linear")
     rand = np.asarray(pool_values(P, jnp.asarray(designs)))
     assert d.random_best == pytest.approx(rand.min(), rel=1e-12)
     F = _vertical(robot, 12)
-    best_random = design_criteria(robot, designs[int(np.argmin(rand))], F, parameters="physical")
+    kw = dict(parameters="physical", model="linear")
+    best_random = design_criteria(robot, designs[int(np.argmin(rand))], F, **kw)
     assert float(best_random.trace) == pytest.approx(rand.min(), rel=1e-8)
-    direct = design_criteria(robot, d.q, F, parameters="physical")
+    direct = design_criteria(robot, d.q, F, **kw)
     assert d.value == pytest.approx(float(direct.trace), rel=1e-8)
     ratio = d.value / rand.min()
-    print(f"physical/full trace: optimised {d.value:.4g}, best of 200 random {rand.min():.4g}")
+    print(f"physical/linear trace: optimised {d.value:.6g}, best of 200 random {rand.min():.4g}")
     print(f"ratio {ratio:.3f}")
-    # A ratio <= 0.5 (which the aggregated set below meets) is NOT met for this criterion
-    # and is not asserted: the criterion's optimum itself lies at ratio ~0.69. Evidence: these
-    # settings (seed 0) and seed 1 with 8 random starts x 300 steps both reach 1.2053;
-    # other runs stop at 1.2137, a neighbouring local optimum (+0.7 %; the full optimum
-    # is a two-level design over q2, see `_design`'s module doc). What we assert: the
-    # optimiser reaches that optimum within 1 % (the spread of the runs we measured),
-    # and the trace is > 90 % the variance of Kc, the reason why random designs come so
-    # close.
-    assert d.value <= 1.01 * 1.2053
-    assert ratio < 0.75
+    # The criterion's best known value: 8.2735, reached by 32 starts x 1000 steps from
+    # seeds 0 and 1 (8.27351 both); these settings reach 8.27359 from seed 0 and stop at
+    # a neighbouring local optimum from seed 1 (8.596, +3.9 %). Asserted: the optimum
+    # within 1 %, which is 0.55 of the best random design.
+    assert d.value <= 1.01 * 8.2735
+    # The warning's share is the design's own: Kc's relative variance over the trace,
+    # more than half of it (the warning's threshold).
     rel = dict(zip(d.criteria.names, np.asarray(d.criteria.relative_std) ** 2, strict=True))
-    assert rel["Kc_N_per_m"] / d.value > 0.9
+    share = rel["Kc_N_per_m"] / d.value
+    assert share > 0.5 and warned.startswith(f"Kc: {100 * share:.0f} % of the trace")
 
 
 def test_aggregated_design_at_most_half_of_random(robot):
