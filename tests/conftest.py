@@ -51,8 +51,8 @@ _SLOWEST_FILES = {
     "test_tree.py": 100,
     "test_montecarlo.py": 67,
     "test_compensation.py": 61,
-    "test_design.py": 54,
     "test_faults.py": 54,
+    "test_design.py": 40,
     "test_urdf_export.py": 33,
     "test_identification.py": 31,
     "test_distributed.py": 31,
@@ -64,11 +64,11 @@ _SLOWEST_FILES = {
     "test_linalg_switch.py": 14,
     "test_no_lapack.py": 14,
     "test_cli_urdf.py": 14,
-    "test_bad_input.py": 13,
     "test_undetermined.py": 13,
     "test_montecarlo_tree.py": 12,
     "test_select.py": 11,
     "test_urdf.py": 10,
+    "test_bad_input.py": 7,
 }
 
 # Each notebook runs in a kernel of its own, which reads the programs that the test
