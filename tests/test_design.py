@@ -244,12 +244,12 @@ def test_structured_and_paper_plans(robot):
 def optimised(robot):
     # The physical set (relative trace, vertical loads, k1 excluded) on the linear model,
     # started from the best 4 of the 200 random feasible designs it is compared with
-    # (seed 0: the `designs` fixture). The same problem on the full model (1.2053, reached
-    # by these settings) takes minutes to compile and run: `benchmarks/bench_design.py`,
-    # its second part; the optimiser's program on the full model is the default design's
-    # (tests/test_design_bound.py).
+    # (seed 0: the `designs` fixture). The same problem on the full model (best known
+    # 1.2053, which these settings reach) takes over a minute on two cores:
+    # `benchmarks/bench_design.py`, its second part; the optimiser on the full model is
+    # checked by the default design (tests/test_design_bound.py).
     # The physical set spends its trace on Kc, which it cannot determine: a warning says so.
-    with pytest.warns(UserWarning, match=r"Kc: (\d+) % of the trace") as record:
+    with pytest.warns(UserWarning, match=r"Kc: \d+ % of the trace") as record:
         d = optimise_design(
             robot,
             12,
