@@ -180,14 +180,25 @@ def _release_compiled_programs():
         gc.collect()
 
 
+# JAX's in-memory caches do not key on the setting: a program that a test file before
+# in the same worker compiled without the optimisations is reused as it is. With
+# `own_programs`, a context of the jit key (set for every thread) keeps the programs
+# compiled inside apart; by default they are shared, as fixtures that compile programs
+# for later tests need.
+_OWN_PROGRAMS = jax.make_user_context(default_value=False)
+
+
 @contextlib.contextmanager
-def _optimisations_on(on: bool = True):
+def _optimisations_on(on: bool = True, own_programs: bool = False):
     before = jax.config.values["jax_disable_most_optimizations"]
+    key_before = _OWN_PROGRAMS.get_global()
     jax.config.update("jax_disable_most_optimizations", not on)
+    _OWN_PROGRAMS.set_global(key_before or own_programs)
     try:
         yield
     finally:
         jax.config.update("jax_disable_most_optimizations", before)
+        _OWN_PROGRAMS.set_global(key_before)
 
 
 @pytest.fixture(scope="module")
@@ -213,24 +224,13 @@ def optimised_test():
         yield
 
 
-# JAX's in-memory caches do not key on the setting: a program that a test file before
-# in the same worker compiled without the optimisations is reused as it is. A context
-# of the jit key keeps a test's own programs apart, set for every thread.
-_OWN_PROGRAMS = jax.make_user_context(default_value=False)
-
-
 @pytest.fixture
 def optimised_own_programs():
     """As `optimised_test`, for a test whose programs this worker may have compiled
     before without the optimisations (common ones, such as the 48-row nonlinear fit),
     which would then run as they are: its programs are compiled anew, with them."""
-    before = _OWN_PROGRAMS.get_global()
-    _OWN_PROGRAMS.set_global(True)
-    try:
-        with _optimisations_on():
-            yield
-    finally:
-        _OWN_PROGRAMS.set_global(before)
+    with _optimisations_on(own_programs=True):
+        yield
 
 
 @contextlib.contextmanager
