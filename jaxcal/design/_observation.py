@@ -134,8 +134,8 @@ def _full_columns_autodiff(robot: Robot, p0, q, force, moment) -> Float[Array, "
     def dp(p):
         return solve_deflection(set_parameters(robot, p), q, force, moment)
 
-    obs = jax.jacfwd(lambda p: dp(p)[0])(p0)
-    ok = dp(p0)[1]
+    # The flag from the solves the derivative runs, not from a second pair of them.
+    obs, ok = jax.jacfwd(dp, has_aux=True)(p0)
     return jnp.where(ok, obs, jnp.nan)
 
 
