@@ -35,6 +35,7 @@ import numpy as np
 from .._batching import map_in_chunks, split_map
 from .._exported import exported
 from .._markers import MarkerData
+from .._model.equilibrium import with_zero_wrench
 from .._model.tree import TreeRobot
 from .._model.tree_statics import DERIVATIVE_RTOL, predict_markers, solver_advice
 from .._precision import require_float64
@@ -102,11 +103,7 @@ def pose_markers(
     q, force, moment = pose
     if not deflection:
         return predict_markers(robot, q, force, moment, derivative_rtol=derivative_rtol)
-    # Both equilibria as one batch of two wrenches (the unloaded one zero): one trace of
-    # the equilibrium and its derivative instead of two, for the same numbers.
-    zero = jnp.zeros(3, q.dtype)
-    f = jnp.stack([zero if force is None else force, zero])
-    m = jnp.stack([zero if moment is None else moment, zero])
+    f, m = with_zero_wrench(force, moment, q.dtype)
 
     def at(f, m):
         return predict_markers(robot, q, f, m, derivative_rtol=derivative_rtol)

@@ -46,6 +46,7 @@ __all__ = [
     "Equilibrium",
     "measured_deflections",
     "with_unloaded",
+    "with_zero_wrench",
     "total_potential",
     "equilibrium",
     "deflection",
@@ -174,14 +175,7 @@ def solve_deflection(
     raise; differentiable in `robot` by the implicit function theorem.
     """
     tree, q, force, moment = _inputs(robot, q, force, moment)
-    # Both equilibria as one batch of two wrenches (the unloaded one zero): one trace of
-    # the solve, its checks and its derivative instead of two, for the same numbers (a
-    # batched loop holds each member once it has converged). The FANUC's 48-row
-    # `observation_physical`: 8 578 equations instead of 13 131, compile 3.7–6.1 →
-    # 2.6–3.3 s; its run about 15 % longer (the unloaded member carries the load's terms).
-    zero = jnp.zeros(3, q.dtype)
-    f = jnp.stack([force, zero])
-    m = jnp.stack([zero if moment is None else moment, zero])
+    f, m = with_zero_wrench(force, moment, q.dtype)
     phi, r = jax.vmap(lambda f, m: _state(tree, q, f, m))(f, m)
     dp = marker_positions(tree, q, phi[0])[0] - marker_positions(tree, q, phi[1])[0]
     return dp, jnp.all(r == RESULTS.successful)
@@ -255,3 +249,16 @@ def with_unloaded(q, force, moment, q_unique):
     f_all = jnp.concatenate([jnp.asarray(force), zeros])
     m_all = None if moment is None else jnp.concatenate([jnp.asarray(moment), zeros])
     return q_all, f_all, m_all
+
+
+def with_zero_wrench(force, moment, dtype) -> tuple[Float[Array, "2 3"], Float[Array, "2 3"]]:
+    """A load and the zero wrench as a batch of two, `(forces, moments)` (N, N·m;
+    `force` or `moment` may be `None`: zero): a deflection's loaded and unloaded
+    equilibria in one `vmap`, so that the solve, its checks and its derivative are
+    traced once, not twice. The numbers are those of two solves (a batched loop holds
+    each member once it has converged); the run carries the load's terms for the
+    unloaded member too (`benchmarks/README.md`, design evidence)."""
+    zero = jnp.zeros(3, dtype)
+    f = jnp.stack([zero if force is None else force, zero])
+    m = jnp.stack([zero if moment is None else moment, zero])
+    return f, m
