@@ -18,14 +18,16 @@ from pathlib import Path
 # 40 % of the time (the task criterion's tests: 35 s to 14 s) and give the same numbers
 # to round-off. Those programs run slower (the discrepancy fits about 4 times): a test
 # file or a test whose programs run long turns the optimisations back on with the
-# `optimised_programs` or `optimised_test` fixture. Set before JAX creates its CPU
-# client; the workers, notebook kernels and subprocesses inherit it (and, importing this
-# file again, find it set). A user's programs keep XLA's defaults;
-# JAXCAL_TEST_XLA_DEFAULTS=1 runs the suite with them.
-_LOOP_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
+# `optimised_programs` or `optimised_test` fixture. Each program's machine code is
+# generated in one piece, not in parts on XLA's thread pool: two workers on two cores
+# have no idle core for the parts (the suite about 6 % less CPU time; benchmarks/README.md).
+# Set before JAX creates its CPU client; the workers, notebook kernels and subprocesses
+# inherit it (and, importing this file again, find it set). A user's programs keep XLA's
+# defaults; JAXCAL_TEST_XLA_DEFAULTS=1 runs the suite with them.
+_SUITE_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false --xla_cpu_parallel_codegen_split_count=1"
 if os.environ.get("JAXCAL_TEST_XLA_DEFAULTS") != "1":
-    if _LOOP_EMITTERS not in os.environ.get("XLA_FLAGS", ""):
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_LOOP_EMITTERS}".strip()
+    if _SUITE_XLA_FLAGS not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_SUITE_XLA_FLAGS}".strip()
     os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = "1"
 
 import jax  # noqa: E402

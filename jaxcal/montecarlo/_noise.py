@@ -117,9 +117,11 @@ def standard_normal(key: Array, shape: tuple[int, ...], dtype=jnp.float64) -> Ar
 # Jitted: float32 arithmetic fused into one program rounds differently from the same
 # operations run one by one, so an eager call would differ from the study's own noise
 # in the last float32 bit; compiled, the trial's noise is bit-identical however it is
-# batched. That rests on XLA generating the same code for it in every program: with its
-# machine code in fewer parts than the default (`xla_cpu_parallel_codegen_split_count`
-# 1 or 2) one value in 24 of an eager draw differed from the batched one by an ulp.
+# batched. That rests on XLA generating the same code for it in every program. With the
+# machine code in one or two parts (`xla_cpu_parallel_codegen_split_count`, default 32),
+# a program that also draws other variates (`jax.random.t`'s, `erf_inv`'s) contracts
+# some of these multiply-adds differently: one value in 24 an ulp off an eager draw (a
+# batched draw of one noise model, as in a study, kept the bits there too).
 @functools.partial(jax.jit, static_argnames="student_t")
 def trial_noise(
     key: Array,
