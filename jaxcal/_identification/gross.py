@@ -14,6 +14,11 @@ the fit is repeated, and so on until no row stands out.
 Excluding a row inflates its σ by a large factor instead of deleting it, so that every
 refit runs the program already compiled for the data's shape.
 
+An observation that no other controls (redundancy 0: the fit passes through it whatever
+its value, as when a few rows carry as many coordinates as there are parameters) cannot
+be tested: its w is 0, not its round-off divided by nearly nothing. Nor is an
+observation named whose exclusion would leave a fitted parameter undetermined.
+
 A tree robot's marker data (`snoop_markers`) differ in two ways:
 
 - The unit is one marker in one row: a reflector knocked off its nest, or one marker
@@ -60,6 +65,10 @@ __all__ = [
 GROSS_ALPHA = 1e-3
 #: σ factor of an excluded row: its weight becomes 1e-16 of the others'.
 INFLATE = 1e8
+#: Redundancy `1 − h` below which an observation is not controlled by the others (a
+#: leverage of 1 computes as 1 − 1e-15 or so; an observation with redundancy 1e-8 is
+#: one whose residual the fit without it would see 10⁴ times larger).
+MIN_REDUNDANCY = 1e-8
 
 
 def critical_w(n_observations: int, alpha: float = GROSS_ALPHA) -> float:
@@ -76,6 +85,27 @@ def _scaled_svd(X: np.ndarray):
     U, s, Vt = np.linalg.svd(X / d, full_matrices=False)
     on = s > 1e-10 * s[0]
     return U[:, on], s[on], Vt[on], d
+
+
+def _w(z: np.ndarray, h: np.ndarray) -> np.ndarray:
+    # |z| / √(1 − h), and 0 where the redundancy is too small for the test to mean anything.
+    r = 1.0 - h
+    return np.where(r > MIN_REDUNDANCY, np.abs(z) / np.sqrt(np.maximum(r, MIN_REDUNDANCY)), 0.0)
+
+
+def _rank(X: np.ndarray) -> int:
+    return int(_scaled_svd(X)[1].size)
+
+
+def _first_testable(w: np.ndarray, crit: float, keeps_rank: Callable[[int], bool]) -> int | None:
+    """The observation of largest |w| above `crit` whose exclusion keeps every fitted
+    parameter determined (`keeps_rank`), or None."""
+    for i in np.argsort(-w, kind="stable"):
+        if not w[i] > crit:
+            return None
+        if keeps_rank(int(i)):
+            return int(i)
+    return None
 
 
 def leverages(X: np.ndarray) -> np.ndarray:
@@ -101,7 +131,7 @@ def w_statistics(
     X = np.asarray(design, float).reshape(n, 3, -1)[keep].reshape(-1, design.shape[1])
     h = leverages(X).reshape(-1, 3)
     w = np.zeros((n, 3))
-    w[keep] = np.abs(z[keep]) / np.sqrt(np.maximum(1.0 - h, 1e-12))
+    w[keep] = _w(z[keep], h)
     return w.max(axis=1)
 
 
@@ -155,10 +185,17 @@ def data_snooping(
     limit = max(1, len(data) // 10)
     rows: list[int] = []
     full, cur = res, res
+    X3 = np.asarray(design, float).reshape(len(data), 3, -1)
+    rank = _rank(X3.reshape(-1, X3.shape[2]))
+
+    def keeps_rank(i: int) -> bool:
+        keep = np.ones(len(data), bool)
+        keep[[*rows, i]] = False
+        return _rank(X3[keep].reshape(-1, X3.shape[2])) == rank
+
     while len(rows) < limit:
-        w = w_statistics(cur, design, rows)
-        i = int(np.argmax(w))
-        if not w[i] > crit:
+        i = _first_testable(w_statistics(cur, design, rows), crit, keeps_rank)
+        if i is None:
             break
         rows.append(i)
         cur = fit(exclude_rows(data, rows))
@@ -231,7 +268,7 @@ def marker_w(z: np.ndarray, h: np.ndarray, excluded: Sequence[int] = ()) -> np.n
     keep[list(excluded)] = False
     s = max(1.0, _MAD * float(np.median(np.abs(z[keep]))))
     w = np.zeros(z.shape)
-    w[keep] = np.abs(z[keep]) / (s * np.sqrt(np.maximum(1.0 - h[keep], 1e-12)))
+    w[keep] = _w(z[keep], h[keep]) / s
     return w.max(axis=1)
 
 
@@ -260,10 +297,18 @@ def snoop_markers(
     ws: list[float] = []
     z, step = z0, np.zeros(design.X.shape[2])
     h, _ = _without(design, z0, found)
+    F = design.X.shape[2]
+
+    def rank_without(excluded: list[int]) -> int:
+        keep = np.ones(m, bool)
+        keep[excluded] = False
+        return _rank(np.concatenate([design.X[keep].reshape(-1, F), design.P]))
+
+    rank = rank_without([])
     while len(found) < max(1, m // 10):
         w = marker_w(z, h, found)
-        i = int(np.argmax(w))
-        if not w[i] > crit:
+        i = _first_testable(w, crit, lambda i: rank_without([*found, i]) == rank)
+        if i is None:
             break
         found.append(i)
         ws.append(float(w[i]))

@@ -22,6 +22,12 @@ from .._identification.elastogeometric import (
     LM_CHI2_TOL as LM_CHI2_TOL,
     scaled_jacobian as scaled_jacobian,
 )
+from .._identification.gross import (
+    critical_w as critical_w,
+    data_snooping as data_snooping,
+    marker_w as marker_w,
+    w_statistics as w_statistics,
+)
 from .._identification.lsq import levenberg_marquardt as levenberg_marquardt
 from .._identification.method import fit_jit as fit_jit
 from .._identification.methods import (
