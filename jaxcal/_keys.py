@@ -1,14 +1,17 @@
 """Unknown keys in a JSON file are refused, naming the nearest known one: a misspelt
 key would otherwise be silently ignored and the object built without what the user
 meant. One check for every file jaxcal reads (robot files of each form, URDF
-sidecars)."""
+sidecars). Numbers are checked where they stand, so that a string, NaN or Infinity
+(which Python's JSON reader accepts) is named by its place, not met later as a failed
+conversion or an equilibrium that does not converge."""
 
 from __future__ import annotations
 
 import difflib
+import math
 from typing import Any
 
-__all__ = ["check_keys"]
+__all__ = ["check_keys", "check_numbers"]
 
 
 def check_keys(
@@ -29,3 +32,32 @@ def check_keys(
             near = near or difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
             hint = f"; did you mean {near[0]!r}?" if near else ""
             raise ValueError(f"{what}: unknown key {where}{k!r}{hint} (known: {', '.join(known)})")
+
+
+def check_numbers(
+    obj: Any, numeric: frozenset[str], *, where: str = "", what: str = "robot file"
+) -> None:
+    """Raise `ValueError` naming the place (e.g. `elements[3].origin_xyz_m[1]`) of a value
+    under a key of `numeric`, at any depth of `obj`, that is not a finite number, a list
+    of them or an object of them (a coupling's factors by joint)."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            at = f"{where}.{k}" if where else str(k)
+            if k in numeric:
+                _finite(v, at, what)
+            else:
+                check_numbers(v, numeric, where=at, what=what)
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            check_numbers(v, numeric, where=f"{where}[{i}]", what=what)
+
+
+def _finite(v: Any, at: str, what: str) -> None:
+    if isinstance(v, dict):
+        for k, x in v.items():
+            _finite(x, f"{at}.{k}", what)
+    elif isinstance(v, list):
+        for i, x in enumerate(v):
+            _finite(x, f"{at}[{i}]", what)
+    elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ValueError(f"{what}: {at} must be a finite number, got {v!r}")

@@ -790,6 +790,33 @@ def test_absurd_robot_file_values_are_refused_unusual_ones_taken(path, absurd, k
     jaxcal.robot_from_dict(d, source="x.json")
 
 
+@pytest.mark.parametrize(
+    "path,value,message",
+    [
+        (
+            ("masses", 0, "at_m", 1),
+            float("nan"),
+            "masses[0].at_m[1] must be a finite number, got nan",
+        ),
+        (("elements", 0, "origin_xyz_m", 0), "0.1", "elements[0].origin_xyz_m[0] must be a finite"),
+        (("elements", 3, "dh", "a_m"), float("inf"), "elements[3].dh.a_m must be a finite number"),
+        (("gravity_m_per_s2",), "down", "gravity_m_per_s2 must be a finite number, got 'down'"),
+        (("noise_std_mm",), 0.0, "noise_std_mm (the instrument's σ) must be positive"),
+    ],
+)
+def test_a_tree_robot_files_numbers_are_checked_where_they_stand(path, value, message):
+    # NaN and Infinity are valid for Python's JSON reader: named by their place, not met
+    # later as an equilibrium that does not converge or a failed conversion.
+    d = jaxcal.tree_to_dict(jaxcal.load_tree("dlr_agile_justin"))
+    jaxcal.tree_from_dict(d)
+    where = d
+    for k in path[:-1]:
+        where = where[k]
+    where[path[-1]] = value
+    with pytest.raises(ValueError, match=r"^robot file: " + re.escape(message)):
+        jaxcal.tree_from_dict(json.loads(json.dumps(d)))
+
+
 def test_an_absurd_marker_position_is_named(data_dir, tmp_path, capsys):
     data = tmp_path / "m.csv"
     data.write_bytes((data_dir / JUSTIN).read_bytes())

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from .._batching import to_device
-from .._keys import check_keys
+from .._keys import check_keys, check_numbers
 from .rotations import rpy_from_matrix
 from .spring_laws import spring_law_from_dict, spring_law_to_dict
 from .tree import EQUILIBRIUM_SOLVERS, SPRINGS, G, TreeRobot
@@ -80,10 +80,18 @@ def _pose(d: dict, where: str, xyz: str, rpy: str, matrix: str) -> np.ndarray:
     return np.concatenate([t, r])
 
 
+# Keys whose values are numbers (or lists or objects of them), wherever they stand.
+_UNITS = ("_m", "_deg", "_mm", "_Nm", "_per_N", "_s2", "matrix", "coupling", "kg")
+_NUMERIC = frozenset(k for keys in _KNOWN.values() for k in keys if k.endswith(_UNITS))
+
+
 def tree_from_dict(d: dict) -> TreeRobot:
     """Build a `TreeRobot` from a parsed robot file (see `jaxcal/robots/*.json`); every
     problem raises `ValueError` naming the key."""
     check_keys(d, "", _KNOWN[""])
+    check_numbers({k: v for k, v in d.items() if k != "experiment"}, _NUMERIC)
+    if not d.get("noise_std_mm", 1.0) > 0:
+        raise ValueError("robot file: noise_std_mm (the instrument's σ) must be positive")
     joints = d.get("joints")
     if not isinstance(joints, list) or not joints:
         raise ValueError("robot file: 'joints' must be a non-empty list of active joints")
