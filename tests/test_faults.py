@@ -801,7 +801,7 @@ def test_absurd_robot_file_values_are_refused_unusual_ones_taken(path, absurd, k
         (("elements", 0, "origin_xyz_m", 0), "0.1", "elements[0].origin_xyz_m[0] must be a finite"),
         (("elements", 3, "dh", "a_m"), float("inf"), "elements[3].dh.a_m must be a finite number"),
         (("gravity_m_per_s2",), "down", "gravity_m_per_s2 must be a finite number, got 'down'"),
-        (("noise_std_mm",), 0.0, "noise_std_mm (the instrument's σ) must be positive"),
+        (("noise_std_mm",), 0.0, "noise_std_mm must be positive, got 0.0"),
     ],
 )
 def test_a_tree_robot_files_numbers_are_checked_where_they_stand(path, value, message):

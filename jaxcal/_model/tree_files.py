@@ -90,8 +90,8 @@ def tree_from_dict(d: dict) -> TreeRobot:
     problem raises `ValueError` naming the key."""
     check_keys(d, "", _KNOWN[""])
     check_numbers({k: v for k, v in d.items() if k != "experiment"}, _NUMERIC)
-    if not d.get("noise_std_mm", 1.0) > 0:
-        raise ValueError("robot file: noise_std_mm (the instrument's σ) must be positive")
+    if not (noise := d.get("noise_std_mm", 1.0)) > 0:
+        raise ValueError(f"robot file: noise_std_mm must be positive, got {noise!r}")
     joints = d.get("joints")
     if not isinstance(joints, list) or not joints:
         raise ValueError("robot file: 'joints' must be a non-empty list of active joints")
