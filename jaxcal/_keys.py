@@ -11,7 +11,7 @@ import difflib
 import math
 from typing import Any
 
-__all__ = ["check_keys", "check_numbers"]
+__all__ = ["check_keys", "check_number", "check_numbers"]
 
 
 def check_keys(
@@ -44,7 +44,7 @@ def check_numbers(
         for k, v in obj.items():
             at = f"{where}.{k}" if where else str(k)
             if k in numeric:
-                _finite(v, at, what)
+                check_number(v, at, what)
             else:
                 check_numbers(v, numeric, where=at, what=what)
     elif isinstance(obj, list):
@@ -52,12 +52,14 @@ def check_numbers(
             check_numbers(v, numeric, where=f"{where}[{i}]", what=what)
 
 
-def _finite(v: Any, at: str, what: str) -> None:
+def check_number(v: Any, at: str, what: str = "robot file") -> None:
+    """Raise `ValueError` unless `v` is a finite number, a list or an object of them,
+    naming its place `at`."""
     if isinstance(v, dict):
         for k, x in v.items():
-            _finite(x, f"{at}.{k}", what)
+            check_number(x, f"{at}.{k}", what)
     elif isinstance(v, list):
         for i, x in enumerate(v):
-            _finite(x, f"{at}[{i}]", what)
+            check_number(x, f"{at}[{i}]", what)
     elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise ValueError(f"{what}: {at} must be a finite number, got {v!r}")

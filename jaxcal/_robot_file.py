@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ._batching import to_device
-from ._keys import check_keys
+from ._keys import check_keys, check_number
 from ._model.robot_files import TREE_PRESETS
 from ._ranges import check_robot_values
 from ._robot import BODIES, GEOMETRY_KEYS, URAD, Experiment, G, Robot
@@ -78,8 +78,9 @@ def _require(d: dict, key: str, where: str) -> Any:
 
 
 def _number(x: Any, key: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(float(x)):
+    if isinstance(x, list | dict):
         raise ValueError(f"robot file: {key} must be a finite number, got {x!r}")
+    check_number(x, key)
     return float(x)
 
 
