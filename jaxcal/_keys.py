@@ -44,7 +44,7 @@ def check_numbers(
         for k, v in obj.items():
             at = f"{where}.{k}" if where else str(k)
             if k in numeric:
-                check_number(v, at, what)
+                _numbers(v, at, what)
             else:
                 check_numbers(v, numeric, where=at, what=what)
     elif isinstance(obj, list):
@@ -52,14 +52,19 @@ def check_numbers(
             check_numbers(v, numeric, where=f"{where}[{i}]", what=what)
 
 
-def check_number(v: Any, at: str, what: str = "robot file") -> None:
-    """Raise `ValueError` unless `v` is a finite number, a list or an object of them,
-    naming its place `at`."""
+def _numbers(v: Any, at: str, what: str) -> None:
+    # A number, or a list or an object of them (a coupling's factors by joint).
     if isinstance(v, dict):
         for k, x in v.items():
-            check_number(x, f"{at}.{k}", what)
+            _numbers(x, f"{at}.{k}", what)
     elif isinstance(v, list):
         for i, x in enumerate(v):
-            check_number(x, f"{at}[{i}]", what)
-    elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            _numbers(x, f"{at}[{i}]", what)
+    else:
+        check_number(v, at, what)
+
+
+def check_number(v: Any, at: str, what: str = "robot file") -> None:
+    """Raise `ValueError` unless `v` is a finite number, naming its place `at`."""
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise ValueError(f"{what}: {at} must be a finite number, got {v!r}")

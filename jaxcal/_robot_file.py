@@ -78,8 +78,6 @@ def _require(d: dict, key: str, where: str) -> Any:
 
 
 def _number(x: Any, key: str) -> float:
-    if isinstance(x, list | dict):
-        raise ValueError(f"robot file: {key} must be a finite number, got {x!r}")
     check_number(x, key)
     return float(x)
 

@@ -93,8 +93,12 @@ def _w(z: np.ndarray, h: np.ndarray) -> np.ndarray:
     return np.where(r > MIN_REDUNDANCY, np.abs(z) / np.sqrt(np.maximum(r, MIN_REDUNDANCY)), 0.0)
 
 
-def _rank(X: np.ndarray) -> int:
-    return int(_scaled_svd(X)[1].size)
+def _rank_without(X: np.ndarray, P: np.ndarray, excluded: Sequence[int]) -> int:
+    # The numerical rank of the design `X` `(m, 3, F)` without the `excluded`
+    # observations, with the prior rows `P` `(k, F)`.
+    keep = np.ones(X.shape[0], bool)
+    keep[list(excluded)] = False
+    return int(_scaled_svd(np.concatenate([X[keep].reshape(-1, X.shape[2]), P]))[1].size)
 
 
 def _first_testable(w: np.ndarray, crit: float, keeps_rank: Callable[[int], bool]) -> int | None:
@@ -186,15 +190,11 @@ def data_snooping(
     rows: list[int] = []
     full, cur = res, res
     X3 = np.asarray(design, float).reshape(len(data), 3, -1)
-    rank = _rank(X3.reshape(-1, X3.shape[2]))
-
-    def keeps_rank(i: int) -> bool:
-        keep = np.ones(len(data), bool)
-        keep[[*rows, i]] = False
-        return _rank(X3[keep].reshape(-1, X3.shape[2])) == rank
-
+    no_prior = np.zeros((0, X3.shape[2]))
+    rank = _rank_without(X3, no_prior, [])
     while len(rows) < limit:
-        i = _first_testable(w_statistics(cur, design, rows), crit, keeps_rank)
+        w = w_statistics(cur, design, rows)
+        i = _first_testable(w, crit, lambda i: _rank_without(X3, no_prior, [*rows, i]) == rank)
         if i is None:
             break
         rows.append(i)
@@ -297,17 +297,10 @@ def snoop_markers(
     ws: list[float] = []
     z, step = z0, np.zeros(design.X.shape[2])
     h, _ = _without(design, z0, found)
-    F = design.X.shape[2]
-
-    def rank_without(excluded: list[int]) -> int:
-        keep = np.ones(m, bool)
-        keep[excluded] = False
-        return _rank(np.concatenate([design.X[keep].reshape(-1, F), design.P]))
-
-    rank = rank_without([])
+    rank = _rank_without(design.X, design.P, [])
     while len(found) < max(1, m // 10):
         w = marker_w(z, h, found)
-        i = _first_testable(w, crit, lambda i: rank_without([*found, i]) == rank)
+        i = _first_testable(w, crit, lambda i: _rank_without(*design, [*found, i]) == rank)
         if i is None:
             break
         found.append(i)
