@@ -10,9 +10,10 @@ import time
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.stats
 
 import jaxcal
-from jaxcal.internal import make_result
+from jaxcal.internal import make_result, residual_warnings
 from jaxcal.internal.cli import main
 
 EXAMPLE = "example_calibration.csv"
@@ -185,6 +186,28 @@ def test_deflections_in_metres_warn_and_example_is_silent(example, tmp_path, cap
     assert "not determined" in out and "more than 10x" not in err
     rc, _, err = run(["identify", example, "--method", "linear"], capsys)
     assert rc == 0 and "warning: reduced chi2" not in err and "10x" not in err
+
+
+@pytest.mark.parametrize("dof", [1, 3, 10, 30, 100, 2878])
+def test_residual_warnings_hold_the_exact_chi2_band(dof):
+    # The exact two-sided 99.9 % band (scipy): inside it, never a warning; beyond it by
+    # 1 %, a warning where the approximation is that close (upper end from 10 dof, lower
+    # end from 30).
+    lo, hi = scipy.stats.chi2.ppf([0.0005, 0.9995], dof)
+    assert residual_warnings(lo * 1.001, dof, "deflections") == []
+    assert residual_warnings(hi * 0.999, dof, "deflections") == []
+    if dof >= 10:
+        (above,) = residual_warnings(hi * 1.01, dof, "deflections")
+        assert "above its 99.9 % band" in above and "larger than the stated sigma" in above
+    if dof >= 30:
+        (below,) = residual_warnings(lo * 0.99, dof, "marker positions")
+        assert "below its 99.9 % band" in below and "Are the marker positions in mm" in below
+
+
+def test_no_degree_of_freedom_is_said():
+    (msg,) = residual_warnings(1e-9, 0, "marker positions")
+    assert msg.startswith("no degree of freedom is left") and "rest on it alone" in msg
+    assert residual_warnings(float("nan"), 5, "deflections") == []
 
 
 def test_sigma_too_small_warns(example, tmp_path, capsys):

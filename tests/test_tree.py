@@ -23,6 +23,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -847,6 +848,7 @@ def identified(tmp_path_factory):
 def test_cli_identify_names_springs_the_data_do_not_determine(identified, capsys):
     part, _, out = identified
     assert "advice" not in out
+    assert any("above its 99.9 % band" in w for w in out["warnings"]), out["warnings"]
     flagged = out["not_determined"]
     assert flagged and out["threshold"] == 0.1
     for p in out["parameters"]:
@@ -858,12 +860,15 @@ def test_cli_identify_names_springs_the_data_do_not_determine(identified, capsys
     args = ["identify", str(part), "--robot", "dlr_agile_justin"]
     args += ["--params", "frames,joint-compliance"]
     assert main(args) == 0
-    text = capsys.readouterr().out
+    text, err = capsys.readouterr()
     first = next(iter(flagged))
     assert f"{first} (not determined)" in text
     assert f"{len(flagged)} springs, masses or spring-law constants are not determined" in text
     assert "--hold-undetermined" in text
     assert "more absolute measurement rows at these" in text  # the advice, computed
+    # Joint springs without the lateral ones leave residuals of several mm where the
+    # robot file states 1 mm of noise: said, as the stds rest on that σ.
+    assert "jaxcal identify: warning: reduced chi2" in err and "above its 99.9 % band" in err
 
 
 def test_cli_identify_states_its_priors(identified, capsys):
@@ -897,10 +902,18 @@ def test_nominal_model_reproduces_published_error(justin, data):
     published uncalibrated mean error is 21.33 mm: the transcription of the robot's
     public facts must give it within 10 %."""
     train, test = split_rows(len(data), 200, 0)
-    cal = jaxcal.calibrate_tree(justin, data.subset(train), ("frames",))
+    # The nominal model leaves about 20 mm where the robot file states 1 mm of noise:
+    # the fit says so. The validation's stages do not (the effects of later groups are
+    # in their residuals by design) and report the same held-out errors.
+    with pytest.warns(UserWarning, match=r"reduced chi2 .* above its 99.9 % band"):
+        cal = jaxcal.calibrate_tree(justin, data.subset(train), ("frames",))
     assert cal.converged
     e = jaxcal.marker_errors(cal.robot, data.subset(test)) * 1e3
     assert 0.9 * 21.33 <= e.mean() <= 1.1 * 21.33, e.mean()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        (stage,) = jaxcal.validate_tree(justin, data.subset(train), data.subset(test), ("frames",))
+    assert stage.mean_mm == pytest.approx(float(e.mean()), rel=1e-9)
 
 
 def test_cli_identify_simulate_round_trip(identified, tmp_path):

@@ -8,6 +8,7 @@ import argparse
 import datetime
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -95,18 +96,22 @@ def identify_tree(args: argparse.Namespace) -> int:
     groups = parse_groups(getattr(args, "params", None), robot, data.deflection)
     priors = priors_of(args)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
-    cal = calibrate_tree(
-        robot,
-        data,
-        groups,
-        hold=tuple(fix_names(args.fix)),
-        threshold=args.max_relative_std,
-        hold_undetermined=args.hold_undetermined,
-        priors=priors,
-        screen_gross=True,
-        keep_outliers=args.keep_outliers,
-    )
-    for line in cal.gross_report(data):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cal = calibrate_tree(
+            robot,
+            data,
+            groups,
+            hold=tuple(fix_names(args.fix)),
+            threshold=args.max_relative_std,
+            hold_undetermined=args.hold_undetermined,
+            priors=priors,
+            screen_gross=True,
+            keep_outliers=args.keep_outliers,
+        )
+    # The gross errors first: the fit's χ² is that of the observations they leave.
+    said = list(dict.fromkeys(str(w.message) for w in caught))
+    for line in [*cal.gross_report(data), *said]:
         print(f"jaxcal identify: warning: {line}", file=sys.stderr)
     gross = cal.gross_list(data)
     prior_std = cal.prior_std if cal.prior_std is not None else np.full(len(cal.table), np.inf)
@@ -183,6 +188,7 @@ def identify_tree(args: argparse.Namespace) -> int:
         "priors": priors,
         "not_determined": not_determined,
         "gross_errors": gross,
+        "warnings": said,
         "saved_robot": saved,
     }
     if advice is not None:

@@ -26,6 +26,7 @@ choices.
 from __future__ import annotations
 
 import time
+import warnings
 
 import equinox as eqx
 import jax
@@ -53,7 +54,7 @@ from .parameter_groups import (
     set_vector,
 )
 from .pivoting import PIVOT_RCOND, fitted_parameters
-from .result import THRESHOLD, relative_std
+from .result import THRESHOLD, relative_std, residual_warnings
 from .tree_result import TreeCalibration
 
 __all__ = [
@@ -226,6 +227,7 @@ def calibrate_tree(
     fitted: np.ndarray | None = None,
     screen_gross: bool = False,
     keep_outliers: bool = False,
+    warn: bool = True,
 ) -> TreeCalibration:
     """Calibrate `robot` on `data`, fitting the parameters of `fit_groups` (default:
     `groups`) that the data determine, starting from the robot's values.
@@ -243,7 +245,9 @@ def calibrate_tree(
     that chooses them (`hold` and `fit_groups` still apply). `screen_gross`: name the
     marker observations that are gross errors (`gross.py`, one at a time) and
     exclude them from the fit, unless `keep_outliers`. Never raises on a failed fit:
-    see `converged` and `message`.
+    see `converged` and `message`. With `warn`, a converged fit whose χ² disagrees with
+    the stated σ, or that leaves no degree of freedom to check it, says so
+    (`warnings.warn`; the standard deviations rest on σ, not on the residuals).
     """
     require_float64("calibration", robot.compliance, np.asarray(data.q))
     if not threshold > 0:
@@ -273,6 +277,10 @@ def calibrate_tree(
         again = fit(robot, hold, None, excluded)
         cal = again._replace(seconds=again.seconds + cal.seconds, gross=cal.gross)
     names = tuple(p.name for p in cal.table if p.name in flagged)
+    if warn and cal.converged:
+        measured = "deflections" if data.deflection else "marker positions"
+        for msg in residual_warnings(cal.chi2, cal.dof, measured):
+            warnings.warn(msg, stacklevel=2)
     return cal._replace(
         not_determined=names,
         free_values=tuple(flagged[n] for n in names),

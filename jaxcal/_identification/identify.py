@@ -31,7 +31,7 @@ from .assembly import held_as_fixed
 from .gross import data_snooping
 from .method import METHODS, fit_jit, method_named
 from .methods import linear_columns
-from .result import THRESHOLD, IdentificationResult, resolve_name
+from .result import THRESHOLD, IdentificationResult, residual_warnings, resolve_name
 
 __all__ = [
     "identify",
@@ -330,39 +330,11 @@ def _holdable(method: str, names) -> bool:
     return method != "two-step" or not {"k2_urad_per_Nm", "Kc_N_per_m", "s0_m"} & set(names)
 
 
-def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:
-    # Two-sided 99.9 % band of χ²(dof) by the Wilson–Hilferty cube-root normal
-    # approximation (relative error < 1 % of the quantile for dof ≥ 10).
-    k = max(dof, 1)
-    c = 2.0 / (9.0 * k)
-    lo = k * max(1.0 - c - z * float(np.sqrt(c)), 0.0) ** 3
-    hi = k * (1.0 - c + z * float(np.sqrt(c))) ** 3
-    return lo, hi
-
-
 def plausibility(robot: Robot, res: IdentificationResult) -> list[str]:
-    """Warnings for results that should not pass silently: a reduced χ² outside its
-    99.9 % band for the degrees of freedom (residuals far smaller or larger than the
-    stated σ: wrong units, wrong σ, gross errors or a missing effect), and estimates that
-    are not positive or more than 10× from the robot file's value."""
-    out = []
-    chi2_red = float(res.chi2_red)
-    if res.dof >= 1 and np.isfinite(chi2_red):
-        lo, hi = _chi2_band(res.dof)
-        band = f"[{lo / res.dof:.3g}, {hi / res.dof:.3g}] for {res.dof} dof"
-        ratio = float(np.sqrt(max(chi2_red, 1e-300)))
-        if chi2_red * res.dof < lo:
-            out.append(
-                f"reduced chi2 {chi2_red:.3g} is below its 99.9 % band {band}: the residuals "
-                f"are {1 / ratio:.3g}x smaller than the stated sigma. Are the deflections in "
-                "mm (not m), and is sigma_mm right?"
-            )
-        elif chi2_red * res.dof > hi:
-            out.append(
-                f"reduced chi2 {chi2_red:.3g} is above its 99.9 % band {band}: the residuals "
-                f"are {ratio:.3g}x larger than the stated sigma. Is sigma_mm right, are there "
-                "gross errors, or is the model missing an effect (jaxcal discover)?"
-            )
+    """Warnings for results that should not pass silently: a χ² that disagrees with the
+    stated σ, or no degree of freedom to check it (`residual_warnings`), and estimates
+    that are not positive or more than 10× from the robot file's value."""
+    out = residual_warnings(float(res.chi2_red) * res.dof, res.dof, "deflections")
     p0 = dict(zip(robot.parameter_names, np.asarray(get_parameters(robot)), strict=True))
     for n, v in zip(res.names, np.asarray(res.estimate), strict=True):
         ref = float(p0[n])

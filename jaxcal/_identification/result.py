@@ -2,7 +2,8 @@
 covariance, standard errors, 95 % intervals, residuals, fit statistics; table and JSON
 output; parameter names given with or without their units, `resolve_name`), and the
 statistics every calibration reports with (`Z95`, `THRESHOLD`,
-`relative_std`, `upper_bound95`). Its assembly from a method's vectors is in
+`relative_std`, `upper_bound95`, and `residual_warnings`: does the fit's χ² agree with
+the stated σ?). Its assembly from a method's vectors is in
 `assembly.py`.
 
 Parameter vectors are in user units (µrad/(N·m), N/m, m; `jaxcal.get_parameters`
@@ -24,6 +25,7 @@ __all__ = [
     "THRESHOLD",
     "Z95",
     "relative_std",
+    "residual_warnings",
     "resolve_name",
     "upper_bound95",
 ]
@@ -47,6 +49,53 @@ def upper_bound95(estimate: float, std: float) -> float | None:
     parameter's lower bound 0 says more)."""
     bound = float(estimate) + Z95_ONE_SIDED * float(std)
     return bound if np.isfinite(bound) and bound > 0 else None
+
+
+def _chi2_band(dof: int, z: float = 3.2905) -> tuple[float, float]:
+    # Two-sided 99.9 % band of χ²(dof) by the Wilson–Hilferty cube-root normal
+    # approximation. It holds the exact band for every dof (fewer false alarms, never
+    # more) and is within 1 % of its upper end from 10 dof, of its lower end from 30
+    # (with fewer than 5 dof its lower end is near 0).
+    k = max(dof, 1)
+    c = 2.0 / (9.0 * k)
+    lo = k * max(1.0 - c - z * float(np.sqrt(c)), 0.0) ** 3
+    hi = k * (1.0 - c + z * float(np.sqrt(c))) ** 3
+    return lo, hi
+
+
+def residual_warnings(chi2: float, dof: int, measured: str) -> list[str]:
+    """What the fit's χ² (`chi2`, on `dof` degrees of freedom) says about the stated σ,
+    as warnings: outside its 99.9 % band, residuals far smaller or larger than σ (wrong
+    units, wrong σ, gross errors or a missing effect); with no degree of freedom, the
+    residuals cannot check σ at all, and the standard deviations rest on it alone. Empty
+    when the χ² agrees. `measured`: what the data hold, as the hint names it
+    (`"deflections"`, `"marker positions"`)."""
+    if not np.isfinite(chi2):
+        return []
+    if dof < 1:
+        return [
+            "no degree of freedom is left (as many fitted parameters as observations): "
+            "the residuals cannot check the stated sigma, and the std rest on it alone. "
+            "More rows would give the fit that check"
+        ]
+    chi2_red = chi2 / dof
+    lo, hi = _chi2_band(dof)
+    band = f"[{lo / dof:.3g}, {hi / dof:.3g}] for {dof} dof"
+    ratio = float(np.sqrt(max(chi2_red, 1e-300)))
+    if chi2 < lo:
+        return [
+            f"reduced chi2 {chi2_red:.3g} is below its 99.9 % band {band}: the residuals "
+            f"are {1 / ratio:.3g}x smaller than the stated sigma. Are the {measured} in mm "
+            "(not m), and is sigma_mm (or the robot file's noise_std_mm) right?"
+        ]
+    if chi2 > hi:
+        return [
+            f"reduced chi2 {chi2_red:.3g} is above its 99.9 % band {band}: the residuals "
+            f"are {ratio:.3g}x larger than the stated sigma (the std, which rest on it, are "
+            "then as much too small). Is sigma_mm (or the robot file's noise_std_mm) right, "
+            "are there gross errors, or is the model missing an effect (jaxcal discover)?"
+        ]
+    return []
 
 
 #: A parameter whose relative standard deviation exceeds this is *not determined by

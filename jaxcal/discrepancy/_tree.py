@@ -297,8 +297,9 @@ def discover_tree(
             for p in table
             if p.group not in nominal and p.group in fit_groups and p.name not in on
         )
+        # The χ² of each model is the workflow's own question (warn=False).
         return calibrate_tree(
-            robot, data, groups, fit_groups=fit_groups, hold=hold, max_steps=max_steps
+            robot, data, groups, fit_groups=fit_groups, hold=hold, max_steps=max_steps, warn=False
         )
 
     say(f"calibrating the nominal model ({', '.join(nominal)})")

@@ -38,6 +38,7 @@ from .._identification.parameter_groups import (
     set_vector as set_vector,
 )
 from .._identification.pivoting import pivoted_subset as pivoted_subset
+from .._identification.result import residual_warnings as residual_warnings
 from .._identification.tree_validation import split_rows as split_rows
 from .._io import (
     OutputError as OutputError,
