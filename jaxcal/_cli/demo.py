@@ -24,7 +24,7 @@ import sys
 import jax.numpy as jnp
 import numpy as np
 
-from .main import print_json, seed
+from .main import print_json, recorded_warnings, seed
 
 
 def demo_experiment(robot, horizontal_fraction: float = 0.45):
@@ -126,10 +126,9 @@ def run(args: argparse.Namespace) -> int:
     extra = simulate(truth, advice.dataset(), noise_std=noise, key=args.seed + 1)
     data = concatenate(table5, extra)
     print(f"identifying the default experiment, {len(data)} rows...", file=sys.stderr)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recorded_warnings() as said:
         res = fit(data)
-    for w in dict.fromkeys(str(w.message) for w in caught):
+    for w in said:
         print(f"jaxcal demo: warning: {w}", file=sys.stderr)
     true = dict(zip(robot.parameter_names, np.asarray(get_parameters(truth)).tolist(), strict=True))
     if args.json:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import warnings
 
 from .._identification.identify import METHODS
 from .._identification.parameter_groups import (
@@ -21,6 +20,7 @@ from .main import (
     fix_names,
     output_failed,
     print_json,
+    recorded_warnings,
 )
 
 
@@ -174,8 +174,7 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     data = read_dataset(args.data, robot)
     print(f"identifying from {len(data)} rows ({args.method})...", file=sys.stderr)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recorded_warnings() as said:
         res = identify(
             robot,
             data,
@@ -186,8 +185,6 @@ def run(args: argparse.Namespace) -> int:
             undetermined="free" if args.keep_undetermined else "hold",
             threshold=args.max_relative_std,
         )
-    # A repeated fit (holding a parameter) repeats its warnings: each is said once.
-    said = list(dict.fromkeys(str(w.message) for w in caught))
     for w in said:
         print(f"jaxcal identify: warning: {w}", file=sys.stderr)
     advice = None

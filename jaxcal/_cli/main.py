@@ -18,7 +18,8 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from .._format import jsonable
@@ -30,6 +31,7 @@ __all__ = [
     "check_output_path",
     "output_failed",
     "print_json",
+    "recorded_warnings",
 ]
 
 #: Exit status of a write that failed after the work (the work is kept: printed, or
@@ -184,6 +186,19 @@ def add_overwrite_argument(p: argparse.ArgumentParser, what: str) -> None:
 
 def print_json(obj) -> None:
     print(json.dumps(jsonable(obj), indent=2))
+
+
+@contextlib.contextmanager
+def recorded_warnings() -> Iterator[list[str]]:
+    """`with recorded_warnings() as said:` the warnings raised inside are recorded, not
+    shown; on leaving, `said` holds each message once, in order (a fit repeated while
+    holding parameters repeats its warnings), for the command to print and to put in
+    its JSON."""
+    said: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield said
+    said.extend(dict.fromkeys(str(w.message) for w in caught))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -8,7 +8,6 @@ import argparse
 import datetime
 import json
 import sys
-import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -20,6 +19,7 @@ from .main import (
     output_failed,
     print_json,
     priors_of,
+    recorded_warnings,
 )
 
 
@@ -96,8 +96,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     groups = parse_groups(getattr(args, "params", None), robot, data.deflection)
     priors = priors_of(args)
     print(f"calibrating {robot.name} on {len(data)} rows ({', '.join(groups)})...", file=sys.stderr)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recorded_warnings() as said:
         cal = calibrate_tree(
             robot,
             data,
@@ -110,7 +109,6 @@ def identify_tree(args: argparse.Namespace) -> int:
             keep_outliers=args.keep_outliers,
         )
     # The gross errors first: the fit's χ² is that of the observations they leave.
-    said = list(dict.fromkeys(str(w.message) for w in caught))
     for line in [*cal.gross_report(data), *said]:
         print(f"jaxcal identify: warning: {line}", file=sys.stderr)
     gross = cal.gross_list(data)
