@@ -180,6 +180,15 @@ def test_end_to_end_cli(truth, data_dir, tmp_path, capsys):
     rms_before = np.sqrt(np.mean(np.sum(before**2, axis=1)))
     assert rms_after <= 0.05 * rms_before, (rms_after, rms_before)
     assert std is not None and np.all(std > 0)
+    # The std rest on the stated σ: the fit's χ² agreed with it (fixed seed), so nothing
+    # is said; a calibration whose residuals were 3.2 times σ is said to be one.
+    assert out["warnings"] == []
+    saved = json.loads(cal.read_text())
+    saved["calibration"]["chi2_red"] = 10.0
+    cal.write_text(json.dumps(saved))
+    assert main([*args, "--json"]) == 0
+    (line,) = json.loads(capsys.readouterr().out)["warnings"]
+    assert "reduced chi2 10 is above its 99.9 % band" in line
 
 
 def test_res_std_covers_realised_residuals(robot, truth, data_dir):

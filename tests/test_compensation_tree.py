@@ -97,6 +97,38 @@ def test_the_fanuc_tree_file_gives_the_fanuc_forms_commands_and_res_std(
     assert std.min() > 1e-4  # a spread worth comparing (mm)
 
 
+def test_compensate_repeats_what_the_saved_fit_says_of_sigma(calibrated_tree, tmp_path, capsys):
+    """The saved tree calibration records its fit's χ² and degrees of freedom as
+    `identify` reported them, and `compensate`, whose `res_std_mm` rest on the stated σ
+    through the covariance, repeats the χ² check of σ: silent at the record's χ² = dof
+    (reduced 1), a warning on stderr and in `--json` at 10 times dof (residuals 3.2
+    times σ), a malformed record named (exit 2)."""
+    cal, fitted = calibrated_tree
+    d = json.loads(cal.read_text())
+    block = d["calibration"]
+    assert (block["chi2"], block["dof"]) == (fitted["chi2"], fitted["dof"]) and block["dof"] > 0
+    assert block["chi2_red"] == pytest.approx(fitted["chi2"] / fitted["dof"], rel=1e-12)
+    path = tmp_path / "path.csv"
+    path.write_text("\n".join((HEADER, *ROWS)) + "\n")
+    robot = tmp_path / "cal.json"
+    args = ["compensate", str(path), "-o", str(tmp_path / "c.csv"), "--robot", str(robot)]
+    said = []
+    for chi2 in (1.0, 10.0):
+        block["chi2"] = chi2 * block["dof"]
+        robot.write_text(json.dumps(d))
+        assert main([*args, "--json"]) == 0
+        out = capsys.readouterr()
+        said.append((json.loads(out.out)["warnings"], out.err))
+    assert said[0][0] == [] and "warning" not in said[0][1]
+    (line,) = said[1][0]
+    assert "reduced chi2 10 is above its 99.9 % band" in line and "3.16x larger" in line
+    assert f"the calibration that res_std_mm rests on: {line}" in said[1][1]
+    block["dof"] = "many"
+    robot.write_text(json.dumps(d))
+    assert main(args) == 2
+    assert "calibration.dof must be an integer >= 0, got 'many'" in capsys.readouterr().err
+
+
 def test_redundant_robot_gets_the_least_norm_correction():
     """Agile Justin (springs of a plausible size) with 50 N down at the right hand: the
     corrected angles land the hand's pose on its target (the tree's own equilibrium at

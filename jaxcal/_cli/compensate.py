@@ -35,7 +35,9 @@ def register(sub) -> None:
             "PATH.csv are ignored, not copied), the model's residual after compensation (res_mm, "
             "res_rot_urad), the condition number, and with a calibrated robot file "
             "(identify --save-robot) res_std_mm, the residual's predicted standard "
-            "deviation from the calibration's covariance. Rows that cannot be compensated "
+            "deviation from the calibration's covariance (a warning where the "
+            "calibration's chi2 said its residuals disagree with the stated sigma that "
+            "covariance rests on). Rows that cannot be compensated "
             "(equilibrium failure, target out of reach, joint limits, near-singular) are "
             "named with the reason and not written; the exit status is then 1. A robot "
             "given as a kinematic tree (a tree robot file, a URDF, or a robot file "
@@ -80,7 +82,8 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._identification.calibration import load_calibrated
-    from .._identification.tree_covariance import saved_covariance
+    from .._identification.result import residual_warnings
+    from .._identification.tree_covariance import saved_covariance, saved_fit
     from .._model.robot_files import is_tree_file
     from ..compensation import compensate, read_path, write_commands
     from .tree import saved_block, tree_robot
@@ -97,12 +100,26 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
     if is_tree_file(args.robot):
         robot, calibration = tree_robot(args), None
-        block = saved_block(args.robot).get("covariance")
-        if block is not None:
-            calibration = saved_covariance(robot, block)
+        block = saved_block(args.robot)
+        if block.get("covariance") is not None:
+            calibration = saved_covariance(robot, block["covariance"])
+        fit = saved_fit(block)
     else:
         robot, calibration = load_calibrated(args.robot)
+        fit = (
+            None
+            if calibration is None
+            else (calibration.chi2_red * calibration.dof, calibration.dof)
+        )
     path = read_path(args.path, robot)
+    # The predicted residual std rest on the calibration's covariance, and that on the
+    # stated σ: what the calibration's χ² said of σ is said again here, where it matters.
+    said = [] if calibration is None or fit is None else residual_warnings(*fit, "measurements")
+    for line in said:
+        print(
+            f"jaxcal compensate: warning: the calibration that res_std_mm rests on: {line}",
+            file=sys.stderr,
+        )
     print(f"compensating {len(path)} rows...", file=sys.stderr)
     tool = 0 if args.tool is None else args.tool
     comp = compensate(
@@ -115,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         written = write_commands(sys.stdout, comp)
         sys.stdout.flush()
         with contextlib.redirect_stdout(sys.stderr):
-            _report(args, comp, calibration, written, None)
+            _report(args, comp, calibration, written, None, said)
         kept = f"the {written} commands are on standard output instead (redirect it with > FILE)"
         return output_failed("compensate", e, kept)
     if args.plot:
@@ -133,23 +150,34 @@ def run(args: argparse.Namespace) -> int:
         try:
             save_figure(fig, args.plot)
         except OSError as e:
-            _report(args, comp, calibration, written, args.output)
+            _report(args, comp, calibration, written, args.output, said)
             return output_failed(
                 "compensate", e, "the commands are written, only the plot is missing"
             )
         finally:
             plt.close(fig)
-    return _report(args, comp, calibration, written, args.output)
+    return _report(args, comp, calibration, written, args.output, said)
 
 
-def _report(args: argparse.Namespace, comp, calibration, written: int, output) -> int:
-    # `output`: the commands file, None when the commands went to standard output.
+def _report(
+    args: argparse.Namespace, comp, calibration, written: int, output, said: list[str]
+) -> int:
+    # `output`: the commands file, None when the commands went to standard output;
+    # `said`: the warnings on the calibration, printed before.
     s = comp.summary()
     refused = s["refused"]
     for r in refused:
         print(f"jaxcal compensate: row {r['row']} refused: {r['reason']}", file=sys.stderr)
     if args.json:
-        print_json({**s, "output": output, "written": written, "calibrated": bool(calibration)})
+        print_json(
+            {
+                **s,
+                "output": output,
+                "written": written,
+                "calibrated": bool(calibration),
+                "warnings": said,
+            }
+        )
     else:
         rows = [
             ["rows", s["rows"]],

@@ -82,7 +82,7 @@ def identify_tree(args: argparse.Namespace) -> int:
     from .._identification.elastogeometric import calibrate_tree
     from .._identification.parameter_groups import parse_groups
     from .._identification.result import relative_std
-    from .._identification.tree_covariance import covariance_block
+    from .._identification.tree_covariance import covariance_block, fit_record
     from .._io import atomic_file
     from .._model.tree_files import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path
@@ -153,6 +153,7 @@ def identify_tree(args: argparse.Namespace) -> int:
             "rows": len(data),
             "groups": list(groups),
             "rms_mm": cal.rms_mm,
+            **fit_record(cal.chi2, cal.dof),
             "parameters": params,
             "held": list(cal.held),
             "not_determined": list(cal.not_determined),
