@@ -181,14 +181,20 @@ def test_end_to_end_cli(truth, data_dir, tmp_path, capsys):
     assert rms_after <= 0.05 * rms_before, (rms_after, rms_before)
     assert std is not None and np.all(std > 0)
     # The std rest on the stated σ: the fit's χ² agreed with it (fixed seed), so nothing
-    # is said; a calibration whose residuals were 3.2 times σ is said to be one.
+    # is said; a calibration whose residuals were 3.2 times σ is said to be one, whether
+    # its block records the χ² or, without it, the reduced χ² only.
     assert out["warnings"] == []
     saved = json.loads(cal.read_text())
-    saved["calibration"]["chi2_red"] = 10.0
-    cal.write_text(json.dumps(saved))
-    assert main([*args, "--json"]) == 0
-    (line,) = json.loads(capsys.readouterr().out)["warnings"]
-    assert "reduced chi2 10 is above its 99.9 % band" in line
+    block = saved["calibration"]
+    without_chi2 = {k: v for k, v in block.items() if k != "chi2"}
+    for record in ({**block, "chi2": 10.0 * block["dof"]}, {**without_chi2, "chi2_red": 10.0}):
+        cal.write_text(json.dumps({**saved, "calibration": record}))
+        assert main([*args, "--json"]) == 0
+        (line,) = json.loads(capsys.readouterr().out)["warnings"]
+        assert "reduced chi2 10 is above its 99.9 % band" in line
+    cal.write_text(json.dumps({**saved, "calibration": {**block, "dof": None}}))
+    assert main(args) == 2
+    assert "calibration.dof: missing (the degrees of freedom of chi2)" in capsys.readouterr().err
 
 
 def test_res_std_covers_realised_residuals(robot, truth, data_dir):

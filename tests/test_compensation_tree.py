@@ -101,8 +101,8 @@ def test_compensate_repeats_what_the_saved_fit_says_of_sigma(calibrated_tree, tm
     """The saved tree calibration records its fit's χ² and degrees of freedom as
     `identify` reported them, and `compensate`, whose `res_std_mm` rest on the stated σ
     through the covariance, repeats the χ² check of σ: silent at the record's χ² = dof
-    (reduced 1), a warning on stderr and in `--json` at 10 times dof (residuals 3.2
-    times σ), a malformed record named (exit 2)."""
+    (reduced 1) and for a block without the record, a warning on stderr and in `--json`
+    at 10 times dof (residuals 3.2 times σ), a malformed record named (exit 2)."""
     cal, fitted = calibrated_tree
     d = json.loads(cal.read_text())
     block = d["calibration"]
@@ -112,21 +112,23 @@ def test_compensate_repeats_what_the_saved_fit_says_of_sigma(calibrated_tree, tm
     path.write_text("\n".join((HEADER, *ROWS)) + "\n")
     robot = tmp_path / "cal.json"
     args = ["compensate", str(path), "-o", str(tmp_path / "c.csv"), "--robot", str(robot)]
-    said = []
-    for chi2 in (1.0, 10.0):
-        block["chi2"] = chi2 * block["dof"]
-        robot.write_text(json.dumps(d))
+
+    def run(block):
+        robot.write_text(json.dumps({**d, "calibration": block}))
         assert main([*args, "--json"]) == 0
         out = capsys.readouterr()
-        said.append((json.loads(out.out)["warnings"], out.err))
-    assert said[0][0] == [] and "warning" not in said[0][1]
-    (line,) = said[1][0]
+        return json.loads(out.out)["warnings"], out.err
+
+    recorded = {k: block.pop(k) for k in ("chi2", "dof", "chi2_red")}
+    for said, err in (run(block), run({**block, **recorded, "chi2": recorded["dof"]})):
+        assert said == [] and "warning" not in err
+    (line,), err = run({**block, **recorded, "chi2": 10.0 * recorded["dof"]})
     assert "reduced chi2 10 is above its 99.9 % band" in line and "3.16x larger" in line
-    assert f"the calibration that res_std_mm rests on: {line}" in said[1][1]
-    block["dof"] = "many"
-    robot.write_text(json.dumps(d))
+    assert f"the fit of the calibration in {robot} said: {line} res_std_mm rests on" in err
+    robot.write_text(json.dumps({**d, "calibration": {**block, **recorded, "dof": "many"}}))
     assert main(args) == 2
-    assert "calibration.dof must be an integer >= 0, got 'many'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"{robot}: robot file: calibration.dof must be an integer >= 0, got 'many'" in err
 
 
 def test_redundant_robot_gets_the_least_norm_correction():
@@ -198,7 +200,7 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
         jaxcal.saved_covariance(robot, {"parameters": ["nose.k_theta"], "matrix": [[1.0]]})
     with pytest.raises(ValueError, match="finite 1x1"):
         jaxcal.saved_covariance(robot, {"parameters": ["torso_2.k_theta"], "matrix": [[1, 2]]})
-    with pytest.raises(ValueError, match="no marker 'nose'"):
+    with pytest.raises(ValueError, match="^tool: no marker 'nose'"):
         jaxcal.compensate(robot, path.subset(np.arange(2)), tool="nose")
     # A rigid target and a choice of tool are the general model's: the FANUC-form model
     # says where to go.
@@ -216,3 +218,9 @@ def test_what_a_tree_robot_cannot_be_compensated_for_is_named(tmp_path, capsys):
     args = ["compensate", str(bad), "--robot", "dlr_agile_justin", "-o", str(tmp_path / "o.csv")]
     assert main(args) == 2
     assert "q7_deg" in capsys.readouterr().err
+    # A tool the robot does not have: named as the option, before the path is read.
+    assert main([*args, "--tool", "nose"]) == 2
+    assert (
+        "error: --tool: no marker 'nose'; the robot has ['right', 'left']"
+        in capsys.readouterr().err
+    )

@@ -81,9 +81,9 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._identification.calibration import load_calibrated
+    from .._identification.calibration import load_calibrated, saved_fit
     from .._identification.result import residual_warnings
-    from .._identification.tree_covariance import saved_covariance, saved_fit
+    from .._identification.tree_covariance import saved_covariance
     from .._model.robot_files import is_tree_file
     from ..compensation import compensate, read_path, write_commands
     from .tree import saved_block, tree_robot
@@ -100,31 +100,38 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
     if is_tree_file(args.robot):
         robot, calibration = tree_robot(args), None
+        names = list(robot.marker_names)
+        if args.tool is not None and args.tool not in names:
+            raise ValueError(f"--tool: no marker {args.tool!r}; the robot has {names}")
         block = saved_block(args.robot)
-        if block.get("covariance") is not None:
-            calibration = saved_covariance(robot, block["covariance"])
-        fit = saved_fit(block)
+        try:
+            if block.get("covariance") is not None:
+                calibration = saved_covariance(robot, block["covariance"])
+            fit = saved_fit(block)
+        except ValueError as e:
+            raise ValueError(f"{args.robot}: robot file: {e}") from None
+        measured = "measurements"
     else:
+        # A FANUC-form file's block is checked by its loader, `saved_fit` included.
         robot, calibration = load_calibrated(args.robot)
-        fit = (
-            None
-            if calibration is None
-            else (calibration.chi2_red * calibration.dof, calibration.dof)
-        )
+        fit = None if calibration is None else saved_fit(saved_block(args.robot))
+        measured = "deflections"
     path = read_path(args.path, robot)
-    # The predicted residual std rest on the calibration's covariance, and that on the
-    # stated σ: what the calibration's χ² said of σ is said again here, where it matters.
-    said = [] if calibration is None or fit is None else residual_warnings(*fit, "measurements")
-    for line in said:
-        print(
-            f"jaxcal compensate: warning: the calibration that res_std_mm rests on: {line}",
-            file=sys.stderr,
-        )
     print(f"compensating {len(path)} rows...", file=sys.stderr)
     tool = 0 if args.tool is None else args.tool
     comp = compensate(
         robot, path, calibration, max_cond=args.max_cond, target=args.target, tool=tool
     )
+    # res_std_mm rests on the calibration's covariance, and that on the σ its data
+    # stated: what the calibration's χ² said of that σ is said again where it is used.
+    said = [] if calibration is None or fit is None else residual_warnings(*fit, measured)
+    for line in said:
+        print(
+            f"jaxcal compensate: warning: the fit of the calibration in {args.robot} said: "
+            f"{line} res_std_mm rests on the same sigma; identify --save-robot again once "
+            "it is right.",
+            file=sys.stderr,
+        )
     try:
         written = write_commands(args.output, comp)
     except OSError as e:

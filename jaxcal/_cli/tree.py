@@ -79,10 +79,11 @@ def load_tree_data(args):
 def identify_tree(args: argparse.Namespace) -> int:
     """`jaxcal identify` for a tree robot: the full calibration (or `--params` groups)."""
     from .._format import format_table
+    from .._identification.calibration import fit_record
     from .._identification.elastogeometric import calibrate_tree
     from .._identification.parameter_groups import parse_groups
     from .._identification.result import relative_std
-    from .._identification.tree_covariance import covariance_block, fit_record
+    from .._identification.tree_covariance import covariance_block
     from .._io import atomic_file
     from .._model.tree_files import tree_to_dict
     from .._model.urdf_export import save_urdf, sidecar_path

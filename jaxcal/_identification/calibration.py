@@ -5,8 +5,10 @@ A calibrated file is an ordinary robot file (it loads with `load_robot` and
 `--robot FILE`) whose compliances and compensator values are the identified ones. Its
 `"calibration"` block records the method, the date, the data file's name and SHA-256,
 the fitted parameters with standard errors and covariance (user units, the order of
-`"parameters"`), the parameters held fixed, and the fit's χ². Compensation reads the
-covariance back (`read_calibration`) to say how accurate a correction is.
+`"parameters"`), the parameters held fixed, and the fit's χ² and degrees of freedom
+(`fit_record`, also in a tree robot's block). Compensation reads the covariance back
+(`read_calibration`) to say how accurate a correction is, and the χ² (`saved_fit`) to
+say whether the stated σ that covariance rests on agreed with the residuals.
 """
 
 from __future__ import annotations
@@ -33,9 +35,11 @@ __all__ = [
     "Calibration",
     "calibrated_robot",
     "calibration_block",
+    "fit_record",
     "load_calibrated",
     "read_calibration",
     "save_robot",
+    "saved_fit",
 ]
 
 
@@ -109,13 +113,40 @@ def calibration_block(result: IdentificationResult, data_file: str | Path | None
         "std": np.asarray(result.std, float).tolist(),
         "covariance": np.asarray(result.covariance, float).tolist(),
         "fixed": list(result.fixed),
-        # Over the rows the fit kept (gross errors excluded): χ²_red · dof.
-        "chi2": float(result.chi2_red) * int(result.dof),
         "excluded_rows": [int(i) + 1 for i in result.gross_rows] if result.gross_excluded else [],
-        "chi2_red": float(result.chi2_red),
-        "dof": int(result.dof),
+        # Over the rows the fit kept (gross errors excluded); χ²_red divides by max(dof, 1).
+        **fit_record(float(result.chi2_red) * max(int(result.dof), 1), int(result.dof)),
         "converged": bool(result.converged),
     }
+
+
+def fit_record(chi2: float, dof: int) -> dict:
+    """The `"chi2"`, `"dof"` and `"chi2_red"` entries of a saved calibration (either
+    form): the fit's χ² over the observations it kept, its degrees of freedom, and
+    their ratio (`None` with no degree of freedom)."""
+    chi2, dof = float(chi2), int(dof)
+    return {"chi2": chi2, "dof": dof, "chi2_red": chi2 / dof if dof > 0 else None}
+
+
+def saved_fit(block: dict) -> tuple[float, int] | None:
+    """The χ² and degrees of freedom that a saved `"calibration"` block records
+    (`fit_record`; from `chi2_red` · `dof` where a block has no `chi2`). `None` where it
+    records none, or a χ² that is not a number (`null`, NaN: a failed fit's).
+    `ValueError` naming the entry for a χ² that is negative, infinite or not a number,
+    and for a missing `dof` or one that is not an integer >= 0."""
+    key = "chi2" if "chi2" in block else "chi2_red" if "chi2_red" in block else None
+    if key is None:
+        return None
+    value, dof = block[key], block.get("dof")
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < math.inf:
+        raise ValueError(f"calibration.{key} must be a number >= 0, got {value!r}")
+    if dof is None:
+        raise ValueError(f"calibration.dof: missing (the degrees of freedom of {key})")
+    if isinstance(dof, bool) or not isinstance(dof, int | float) or dof < 0 or dof != int(dof):
+        raise ValueError(f"calibration.dof must be an integer >= 0, got {dof!r}")
+    return float(value) * (int(dof) if key == "chi2_red" else 1), int(dof)
 
 
 def save_robot(
@@ -169,6 +200,7 @@ def _calibration_from_dict(c: Any, robot: Robot) -> Calibration:
     cov = arr("covariance", (p, p))
     if not np.allclose(cov, cov.T, rtol=1e-9, atol=0) or np.any(np.diag(cov) < 0):
         raise ValueError(f"{where}.covariance must be symmetric with a non-negative diagonal")
+    fit = saved_fit(c)
     fixed = c.get("fixed", [])
     if not isinstance(fixed, list):
         raise ValueError(f"{where}.fixed must be a list of names")
@@ -182,8 +214,8 @@ def _calibration_from_dict(c: Any, robot: Robot) -> Calibration:
         date=str(c.get("date", "")),
         data_file=str(c.get("data_file", "")),
         data_sha256=str(c.get("data_sha256", "")),
-        chi2_red=float(c.get("chi2_red", math.nan)),
-        dof=int(c.get("dof", 0)),
+        chi2_red=math.nan if fit is None or fit[1] == 0 else fit[0] / fit[1],
+        dof=0 if fit is None else fit[1],
     )
 
 

@@ -196,14 +196,16 @@ def link_angles(
     return q + phi[jnp.asarray(rows, int), 0]
 
 
-def marker_index(robot: TreeRobot, at: int | str) -> int:
-    """The index of marker `at` (a name or an index), or `ValueError` naming it."""
+def marker_index(robot: TreeRobot, at: int | str, argument: str = "at") -> int:
+    """The index of marker `at` (a name or an index), or `ValueError` naming it as the
+    caller's `argument`."""
+    names = list(robot.marker_names)
     if isinstance(at, str):
-        if at not in robot.marker_names:
-            raise ValueError(f"at: no marker {at!r}; the robot has {list(robot.marker_names)}")
-        return robot.marker_names.index(at)
-    if not 0 <= at < len(robot.marker_names):
-        raise ValueError(f"at: marker index {at} out of range ({len(robot.marker_names)})")
+        if at not in names:
+            raise ValueError(f"{argument}: no marker {at!r}; the robot has {names}")
+        return names.index(at)
+    if not 0 <= at < len(names):
+        raise ValueError(f"{argument}: marker index {at} out of range ({len(names)})")
     return int(at)
 
 

@@ -173,7 +173,7 @@ def compensate(
     if target not in TARGETS:
         raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
     if isinstance(robot, TreeRobot):
-        at = tool_marker(robot, tool)
+        at = tool_marker(robot, tool, "tool")
         return _compensate_tree(robot, path, calibration, max_cond, length_scale, tol, target, at)
     if tool != 0:
         raise ValueError(f"tool {tool!r}: the FANUC-form robot's tool is its tool point")

@@ -60,15 +60,15 @@ _POSE = 6
 TARGETS = ("gravity", "rigid")
 
 
-def tool_marker(robot: TreeRobot, at: int | str = 0) -> int:
-    """The index of the tool marker `at` of a robot that can be compensated, or
-    `ValueError` naming what is missing."""
+def tool_marker(robot: TreeRobot, at: int | str = 0, argument: str = "at") -> int:
+    """The index of the tool marker `at` (the caller's `argument`) of a robot that can be
+    compensated, or `ValueError` naming what is missing."""
     if robot.n_joints < _POSE:
         raise ValueError(
             f"robot {robot.name!r}: compensating a tool pose (6 equations) needs at least 6 "
             f"active joints; it has {robot.n_joints}"
         )
-    return marker_index(robot, at)
+    return marker_index(robot, at, argument)
 
 
 def compensate_tree_row(
