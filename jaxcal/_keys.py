@@ -64,7 +64,9 @@ def _numbers(v: Any, at: str, what: str) -> None:
         check_number(v, at, what)
 
 
-def check_number(v: Any, at: str, what: str = "robot file") -> None:
-    """Raise `ValueError` unless `v` is a finite number, naming its place `at`."""
+def check_number(v: Any, at: str, what: str | None = "robot file") -> None:
+    """Raise `ValueError` unless `v` is a finite number, naming its place `at` (after
+    `what`, unless `None`: a caller that names the file itself)."""
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ValueError(f"{what}: {at} must be a finite number, got {v!r}")
+        where = at if what is None else f"{what}: {at}"
+        raise ValueError(f"{where} must be a finite number, got {v!r}")

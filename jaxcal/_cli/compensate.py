@@ -85,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from .._identification.result import residual_warnings
     from .._identification.tree_covariance import saved_covariance
     from .._model.robot_files import is_tree_file
+    from .._model.tree_kinematics import marker_index
     from ..compensation import compensate, read_path, write_commands
     from .tree import saved_block, tree_robot
 
@@ -98,11 +99,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--max-cond must be > 1, got {args.max_cond}")
     if args.tool is not None and not is_tree_file(args.robot):
         raise ValueError("--tool: for a robot given as a kinematic tree (its markers)")
+    fit = None
     if is_tree_file(args.robot):
         robot, calibration = tree_robot(args), None
-        names = list(robot.marker_names)
-        if args.tool is not None and args.tool not in names:
-            raise ValueError(f"--tool: no marker {args.tool!r}; the robot has {names}")
+        if args.tool is not None:
+            marker_index(robot, args.tool, "--tool")
         block = saved_block(args.robot)
         try:
             if block.get("covariance") is not None:
@@ -112,9 +113,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.robot}: robot file: {e}") from None
         measured = "measurements"
     else:
-        # A FANUC-form file's block is checked by its loader, `saved_fit` included.
+        # A FANUC-form file's block is checked by its loader, its fit record included.
         robot, calibration = load_calibrated(args.robot)
-        fit = None if calibration is None else saved_fit(saved_block(args.robot))
+        if calibration is not None:
+            fit = (calibration.chi2_red * max(calibration.dof, 1), calibration.dof)
         measured = "deflections"
     path = read_path(args.path, robot)
     print(f"compensating {len(path)} rows...", file=sys.stderr)

@@ -26,6 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._io import atomic_file
+from .._keys import check_number
 from .._parameters import get_parameters, set_parameters
 from .._robot import Robot
 from .._robot_file import load_robot_dict, robot_from_dict, robot_to_dict
@@ -50,7 +51,8 @@ class Calibration(eqx.Module):
     - `estimate`, `std` `(p,)` and `covariance` `(p, p)`: user units.
     - `fixed`: parameters held at the robot's value (no uncertainty), static.
     - `method`, `date`, `data_file`, `data_sha256`: provenance, static.
-    - `chi2_red`, `dof`: the fit's reduced χ² and degrees of freedom.
+    - `chi2_red`, `dof`: the fit's reduced χ² (χ² / max(dof, 1), as the result's) and
+      degrees of freedom; NaN and 0 where the block records no fit.
     """
 
     names: tuple[str, ...] = eqx.field(static=True)
@@ -140,8 +142,9 @@ def saved_fit(block: dict) -> tuple[float, int] | None:
     value, dof = block[key], block.get("dof")
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < math.inf:
-        raise ValueError(f"calibration.{key} must be a number >= 0, got {value!r}")
+    check_number(value, f"calibration.{key}", None)
+    if value < 0:
+        raise ValueError(f"calibration.{key} must be >= 0, got {value!r}")
     if dof is None:
         raise ValueError(f"calibration.dof: missing (the degrees of freedom of {key})")
     if isinstance(dof, bool) or not isinstance(dof, int | float) or dof < 0 or dof != int(dof):
@@ -214,7 +217,7 @@ def _calibration_from_dict(c: Any, robot: Robot) -> Calibration:
         date=str(c.get("date", "")),
         data_file=str(c.get("data_file", "")),
         data_sha256=str(c.get("data_sha256", "")),
-        chi2_red=math.nan if fit is None or fit[1] == 0 else fit[0] / fit[1],
+        chi2_red=math.nan if fit is None else fit[0] / max(fit[1], 1),
         dof=0 if fit is None else fit[1],
     )
 

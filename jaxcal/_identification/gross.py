@@ -300,7 +300,9 @@ def snoop_markers(
     rank = _rank_without(design.X, design.P, [])
     while len(found) < max(1, m // 10):
         w = marker_w(z, h, found)
-        i = _first_testable(w, crit, lambda i: _rank_without(*design, [*found, i]) == rank)
+        i = _first_testable(
+            w, crit, lambda i: _rank_without(design.X, design.P, [*found, i]) == rank
+        )
         if i is None:
             break
         found.append(i)
