@@ -52,20 +52,14 @@ PUBLISHED = {
 }
 
 
-def _rows(data, idx):
-    n = len(data)
-    return jax.tree_util.tree_map(
-        lambda x: x[idx] if hasattr(x, "shape") and x.shape[:1] == (n,) else x, data
-    )
-
-
 def validate(seeds: list[int]) -> None:
     robot = jaxcal.load_tree("dlr_agile_justin")
     data = jaxcal.read_markers(DATA, robot)
     for seed in seeds:
         train, test = split_rows(len(data), 200, seed)
         t0 = time.perf_counter()
-        stages = jaxcal.validate_tree(robot, _rows(data, train), _rows(data, test))
+        held = data.subset(test)
+        stages = jaxcal.validate_tree(robot, data.subset(train), held)
         print(f"seed {seed}: {time.perf_counter() - t0:.0f} s")
         for s in stages:
             pub = "/".join(f"{v:g}" for v in PUBLISHED[s.groups[-1]])
@@ -73,13 +67,19 @@ def validate(seeds: list[int]) -> None:
                 f"  {s.groups[-1]:20s} {s.mean_mm:6.2f} {s.std_mm:5.2f} {s.max_mm:6.2f}  "
                 f"fitted {s.fitted:3d} converged {s.converged}  published {pub}"
             )
+        for g in stages[-1].gross_list(held, robot.marker_names):
+            print(
+                f"  held-out gross error: row {g['row']} {g['marker']} {g['error_mm']:.2f} mm "
+                f"(|w| {g['w']:.1f})"
+            )
+        print(f"  max without them: {stages[-1].max_kept_mm:.2f} mm")
 
 
 def identify_times() -> None:
     robot = jaxcal.load_tree("dlr_agile_justin")
     data = jaxcal.read_markers(DATA, robot)
     train, _ = split_rows(len(data), 200, 0)
-    part = _rows(data, train)
+    part = data.subset(train)
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "justin300.csv")
         jaxcal.write_markers(path, part, robot, part.markers)
@@ -130,8 +130,8 @@ def hold_study(seeds: list[int]) -> None:
     for seed in seeds:
         train, test = split_rows(len(data), 200, seed)
         for hold in (False, True):
-            cal = jaxcal.calibrate_tree(robot, _rows(data, train), hold_undetermined=hold)
-            e = jaxcal.marker_errors(cal.robot, _rows(data, test)) * 1e3
+            cal = jaxcal.calibrate_tree(robot, data.subset(train), hold_undetermined=hold)
+            e = jaxcal.marker_errors(cal.robot, data.subset(test)) * 1e3
             print(
                 f"seed {seed}, undetermined {'held' if hold else 'fitted'}: held-out "
                 f"{e.mean():.2f} / {e.std():.2f} / {e.max():.2f} mm, {int(cal.fitted.sum())} "

@@ -70,6 +70,10 @@ class MarkerData(eqx.Module):
     def __len__(self) -> int:
         return int(self.q.shape[0])
 
+    def label(self, row: int) -> str:
+        """How messages name row `row` (0-based): its `ids` entry, else its number from 1."""
+        return self.ids[row] if self.ids and self.ids[row] else str(row + 1)
+
     def observations(self) -> tuple[np.ndarray, np.ndarray]:
         """Row and marker index of every seen marker (host-side)."""
         rows, markers = np.nonzero(np.asarray(self.seen))
@@ -293,5 +297,4 @@ def write_markers(
             cells = [f"{v:.12g}" for v in np.asarray(data.q[r]) * unit]
             cells += [f"{v:.12g}" for _, x in loads for v in np.asarray(x[r])]
             cells += ["" if not np.isfinite(v) else f"{v:.6f}" for v in y[r].ravel()]
-            label = data.ids[r] if data.ids else str(r + 1)
-            w.writerow([label, *cells, f"{float(data.sigma[r]) * 1e3:g}"])
+            w.writerow([data.label(r), *cells, f"{float(data.sigma[r]) * 1e3:g}"])

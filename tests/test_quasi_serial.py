@@ -34,7 +34,7 @@ import scipy.spatial.transform
 from hypothesis import given, settings, strategies as st
 
 import jaxcal
-from jaxcal.internal import get_vector, set_vector
+from jaxcal.internal import get_vector, set_vector, split_rows
 from jaxcal.internal.cli import main
 
 DATA = Path(__file__).parent / "data"
@@ -473,17 +473,45 @@ def test_deflection_data_calibrate_the_tree_as_the_fanuc_form(fanuc, tree_file, 
     assert abs(out["chi2"] - float(ref.chi2_red) * ref.dof) <= 6 * 0.03**2
 
 
-def test_validate_on_deflection_data_stages_the_springs(tree_file, capsys):
+def test_validate_on_deflection_data_stages_the_springs(fanuc, tree_file, tmp_path, capsys):
     """`jaxcal validate` on deflection data adds the spring groups in turn (deflections
     do not determine the geometry) and fits the FANUC's six joint springs, nothing
-    else: its held-out error is of the order of its training error."""
-    args = ["validate", str(DATA / "example_calibration.csv"), "--robot", str(tree_file)]
-    assert main([*args, "--test", "16", "--seed", "0", "--json"]) == 0
+    else: its held-out error is of the order of its training error. The example's
+    held-out rows hold no gross error, and none is named (a false alarm has probability
+    ≤ 0.1 % by the test's Bonferroni bound); one held-out deflection 0.5 mm (25 σ) off
+    is named, with the largest error of the others, and the table still counts it."""
+    args = ["--robot", str(tree_file), "--test", "16", "--seed", "0"]
+    clean = ["validate", str(DATA / "example_calibration.csv"), *args]
+    assert main([*clean, "--json"]) == 0
     stages = json.loads(capsys.readouterr().out)["stages"]
     assert [s["added"] for s in stages] == list(jaxcal.DEFLECTION_GROUPS)
     first = stages[0]
     assert first["converged"] and first["fitted"] == 6, first
     assert first["mean_mm"] <= 2 * first["train_rms_mm"], first
+    for s in stages:
+        assert s["held_out_gross"] == [] and s["max_without_gross_mm"] == s["max_mm"], s
+    # The same split's training rows (so the same fits), one held-out row knocked off.
+    _, test = split_rows(48, 16, 0)
+    lines = (DATA / "example_calibration.csv").read_text().splitlines()
+    cells = lines[1 + test[3]].split(",")
+    dx = lines[0].split(",").index("dx_mm")
+    cells[dx] = f"{float(cells[dx]) + 0.5:.6f}"
+    lines[1 + test[3]] = ",".join(cells)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    assert main(["validate", str(bad), *args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)["stages"]
+    for s, c in zip(out, stages, strict=True):
+        (g,) = s["held_out_gross"]
+        assert (g["row"], g["marker"]) == (str(test[3] + 1), fanuc[1].marker_names[0]), g
+        assert g["w"] > 20 and abs(g["error_mm"] - 0.5) < 0.1, g
+        assert s["max_mm"] == g["error_mm"] and s["max_without_gross_mm"] <= c["max_mm"]
+        assert s["mean_mm"] > c["mean_mm"]  # counted in the table
+    assert main(["validate", str(bad), *args]) == 0
+    assert (
+        f"stand out as gross errors after {out[-1]['added']}: row {test[3] + 1}, marker "
+        f"{fanuc[1].marker_names[0]}: {g['error_mm']:.2f} mm (|w| {g['w']:.1f})"
+    ) in capsys.readouterr().out
 
 
 def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tree_file, tmp_path, capsys):

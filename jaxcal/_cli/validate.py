@@ -44,7 +44,9 @@ def register(sub) -> None:
             "print the mean, std and max 3-D marker (or deflection) error (mm) on the held-out "
             "rows after "
             "each; with --folds K, K disjoint test sets instead. For Agile Justin the published "
-            "figures are printed beside."
+            "figures are printed beside. Held-out observations that stand out from the others "
+            "as gross errors (the test identify applies to its data) are named below the "
+            "table, with the largest error without them; the table counts every observation."
         ),
     )
     p.add_argument(
@@ -99,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
 
-    folds = []
+    folds, tests = [], [data.subset(test) for _, test in splits]
     for k, (train, test) in enumerate(splits):
         print(
             f"fold {k + 1}/{len(splits)}: calibrating on {len(train)} rows, testing on "
@@ -110,13 +112,14 @@ def run(args: argparse.Namespace) -> int:
             validate_tree(
                 robot,
                 data.subset(train),
-                data.subset(test),
+                tests[k],
                 groups,
                 progress=progress,
                 priors=priors,
             )
         )
     published = PUBLISHED.get(robot.name, {})
+    names = robot.marker_names
     stages = []
     for i, g in enumerate(groups):
         rows = [f[i] for f in folds]
@@ -132,6 +135,11 @@ def run(args: argparse.Namespace) -> int:
                 "not_determined": [list(f.not_determined) for f in rows],
                 "converged": all(s.converged for s in rows),
                 "published_mm": list(published[g]) if g in published else None,
+                # held-out observations that stand out as gross errors, over the folds
+                "held_out_gross": [
+                    e for f, t in zip(rows, tests, strict=True) for e in f.gross_list(t, names)
+                ],
+                "max_without_gross_mm": float(np.max([s.max_kept_mm for s in rows])),
             }
         )
     if args.json:
@@ -184,6 +192,17 @@ def run(args: argparse.Namespace) -> int:
     )
     if priors:
         print(priors_line(priors, parameter_table(robot, groups)))
+    last = stages[-1]
+    if last["held_out_gross"]:
+        named = "; ".join(
+            f"row {g['row']}, marker {g['marker']}: {g['error_mm']:.2f} mm (|w| {g['w']:.1f})"
+            for g in last["held_out_gross"]
+        )
+        print(
+            f"held-out observations that stand out as gross errors after {last['added']}: "
+            f"{named}. The largest error without them: {last['max_without_gross_mm']:.2f} mm "
+            "(the table counts them)"
+        )
     if any(any(f) for s in stages for f in s["not_determined"]):
         print(
             "not det.: fitted springs, masses or spring-law constants whose relative std "

@@ -96,7 +96,7 @@ class TreeCalibration(NamedTuple):
         calibration's data."""
         return [
             {
-                "row": data.ids[g.row] if data.ids and data.ids[g.row] else str(g.row + 1),
+                "row": data.label(g.row),
                 "marker": self.robot.marker_names[g.marker],
                 "w": g.w,
                 "error_mm": g.error * 1e3,

@@ -1,6 +1,8 @@
 """Held-out validation of tree-robot calibrations: model marker positions at a data
 set's poses, the 3-D errors against its measurements, and the published protocol's
-table (rows held out at random, the parameter groups added in turn)."""
+table (rows held out at random, the parameter groups added in turn), with the held-out
+observations that stand out from the others as gross errors: a held-out max is then
+known to be the data's or the model's."""
 
 from __future__ import annotations
 
@@ -15,8 +17,9 @@ from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from .._model.tree_statics import solver_advice
 from .elastogeometric import calibrate_tree, predict_rows
+from .gross import heldout_gross
 from .parameter_groups import PriorSpec, default_groups
-from .tree_result import TreeCalibration
+from .tree_result import GrossError, TreeCalibration
 
 __all__ = [
     "Stage",
@@ -57,9 +60,14 @@ def require_converged(robot: TreeRobot, ok: np.ndarray) -> None:
 
 def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
     """3-D error (m) of every seen marker, measured − model, in `observations` order."""
+    return np.linalg.norm(_marker_residuals(robot, data), axis=-1)
+
+
+def _marker_residuals(robot: TreeRobot, data: MarkerData) -> np.ndarray:
+    # `(m, 3)` measured − model (m) of every seen marker, in `observations` order.
     y, _ = predicted_markers(robot, data)
     rows, markers = data.observations()
-    return np.linalg.norm(np.asarray(data.markers)[rows, markers] - y[rows, markers], axis=-1)
+    return np.asarray(data.markers)[rows, markers] - y[rows, markers]
 
 
 class Stage(NamedTuple):
@@ -78,6 +86,21 @@ class Stage(NamedTuple):
     seconds: float
     not_determined: tuple[str, ...] = ()
     calibration: TreeCalibration | None = None
+    gross: tuple[GrossError, ...] = ()
+    max_kept_mm: float = float("nan")
+
+    def gross_list(self, test: MarkerData, marker_names: tuple[str, ...]) -> list[dict]:
+        """`gross` as the command line's JSON gives it (row label, marker name, |w|, 3-D
+        error in mm); `test`: the held-out data, `marker_names`: the robot's."""
+        return [
+            {
+                "row": test.label(g.row),
+                "marker": marker_names[g.marker],
+                "w": g.w,
+                "error_mm": g.error * 1e3,
+            }
+            for g in self.gross
+        ]
 
 
 def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +132,12 @@ def validate_tree(
         # Early stages leave the effects of later groups in the residuals: their χ² is
         # large by design, and the held-out errors are what a stage reports.
         cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors, warn=False)
-        e = marker_errors(cal.robot, test) * 1e3
+        r = _marker_residuals(cal.robot, test)
+        e = np.linalg.norm(r, axis=-1) * 1e3
+        rows, markers = test.observations()
+        named = heldout_gross(r / np.asarray(test.sigma)[rows, None])
+        kept = np.ones(e.size, bool)
+        kept[[i for i, _ in named]] = False
         out.append(
             Stage(
                 groups=groups[:k],
@@ -122,6 +150,11 @@ def validate_tree(
                 seconds=cal.seconds,
                 not_determined=cal.not_determined,
                 calibration=cal,
+                gross=tuple(
+                    GrossError(int(rows[i]), int(markers[i]), w, float(e[i]) * 1e-3)
+                    for i, w in named
+                ),
+                max_kept_mm=float(e[kept].max()) if kept.any() else float("nan"),
             )
         )
         if progress is not None:
