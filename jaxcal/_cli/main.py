@@ -7,22 +7,19 @@ table by default and one JSON object with `--json`.
 
 from __future__ import annotations
 
-import _thread
 import argparse
 import contextlib
 import importlib
 import json
 import os
-import signal
-import socket
 import sys
 import threading
-import time
 import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from .._format import jsonable
+from .interrupt import end_if_stuck, end_now, interrupt_again
 
 __all__ = [
     "main",
@@ -37,9 +34,6 @@ __all__ = [
 #: Exit status of a write that failed after the work (the work is kept: printed, or
 #: the command says where); bad input is 2, an interrupt 130.
 OUTPUT_FAILED = 1
-#: Seconds an interrupted command has to end by itself (Python sees Ctrl-C only between
-#: bytecodes: a compile in native code can hold it for a minute) before it is ended.
-INTERRUPT_GRACE_S = 2.0
 
 # Subcommand modules, in the order `jaxcal --help` lists them.
 COMMANDS = (
@@ -238,80 +232,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     said = threading.Event()  # "interrupted" printed
-    with _end_if_stuck(args.command, said):
+    with end_if_stuck(args.command, said):
         try:
             return _run(args, own_process=argv is None)
         except KeyboardInterrupt:
             said.set()
             print(f"jaxcal {args.command}: interrupted", file=sys.stderr)
             if argv is None:
-                _end_now(130)
+                end_now(130)
             return 130
-
-
-def _end_now(status: int) -> None:
-    # No half-written output (`atomic_file`'s temporary files removed), streams flushed.
-    from .._output import remove_partial_files
-
-    remove_partial_files()
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os._exit(status)
-
-
-@contextlib.contextmanager
-def _end_if_stuck(command: str, said: threading.Event):
-    """Make sure that Ctrl-C ends the process within `INTERRUPT_GRACE_S` seconds.
-
-    Python raises KeyboardInterrupt in the main thread only when it next runs bytecode:
-    a compile in XLA's native code, or the interpreter waiting at exit for a worker
-    thread that compiles, holds it back for as long as they take. Python's C signal
-    handler also writes the signal's number to a wakeup fd at once, whatever the main
-    thread does; a watcher thread reads it, and if the process is still there
-    `INTERRUPT_GRACE_S` seconds later, removes the temporary files of writes in
-    progress (no output is ever half-written: `atomic_file`), says "interrupted" if
-    the command has not, and ends the process with status 130. Outside the main thread
-    (no signals there) it does nothing."""
-    try:
-        reader, writer = socket.socketpair()
-    except OSError:
-        yield
-        return
-    writer.setblocking(False)
-    try:
-        previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
-    except ValueError:  # not the main thread
-        reader.close()
-        writer.close()
-        yield
-        return
-
-    def watch():
-        # Until the command ends (end of file: the writer is closed) or Ctrl-C comes.
-        # Then the reader stays open: a second Ctrl-C, or `_thread.interrupt_main`,
-        # writes to the fd again.
-        while True:
-            try:
-                got = reader.recv(64)
-            except OSError:
-                got = b""
-            if not got:
-                reader.close()
-                return
-            if signal.SIGINT in got:
-                break
-        time.sleep(INTERRUPT_GRACE_S)
-        if not said.is_set():
-            os.write(2, f"jaxcal {command}: interrupted\n".encode())
-        _end_now(130)
-
-    threading.Thread(target=watch, name="jaxcal-interrupt", daemon=True).start()
-    try:
-        yield
-    finally:
-        signal.set_wakeup_fd(previous)
-        writer.close()
 
 
 def _run(args: argparse.Namespace, own_process: bool = False) -> int:
@@ -344,7 +273,7 @@ def _run(args: argparse.Namespace, own_process: bool = False) -> int:
         print(f"jaxcal {args.command}: warning: {message}", file=sys.stderr)
 
     shown, warnings.showwarning = warnings.showwarning, show
-    unraisable, sys.unraisablehook = sys.unraisablehook, _interrupt_again(sys.unraisablehook)
+    unraisable, sys.unraisablehook = sys.unraisablehook, interrupt_again(sys.unraisablehook)
     try:
         return int(args.func(args) or 0)
     except (DataError, ValueError, DeflectionError) as e:
@@ -368,24 +297,6 @@ def _run(args: argparse.Namespace, own_process: bool = False) -> int:
     finally:
         warnings.showwarning = shown
         sys.unraisablehook = unraisable
-
-
-def _interrupt_again(previous):
-    """An unraisable-exception hook that does not let Ctrl-C get lost. Python drops an
-    exception raised where it cannot propagate, such as a garbage-collector callback
-    (jaxlib has one, and it runs often during a compile): a Ctrl-C landing there would
-    be printed as "Exception ignored" and the command would run on. The hook raises it
-    again in the main thread, where it stops the command (exit status 130): from another
-    thread, a moment later, so that it lands after the callback (an interrupt raised
-    in the hook itself would be dropped as well)."""
-
-    def hook(info):
-        if isinstance(info.exc_value, KeyboardInterrupt):
-            threading.Timer(0.05, _thread.interrupt_main).start()
-        else:
-            previous(info)
-
-    return hook
 
 
 def _enable_cache() -> None:
