@@ -26,6 +26,7 @@ __all__ = [
     "split_rows",
     "validate_tree",
     "marker_errors",
+    "marker_residuals",
     "predicted_markers",
     "require_converged",
 ]
@@ -60,11 +61,12 @@ def require_converged(robot: TreeRobot, ok: np.ndarray) -> None:
 
 def marker_errors(robot: TreeRobot, data: MarkerData) -> np.ndarray:
     """3-D error (m) of every seen marker, measured − model, in `observations` order."""
-    return np.linalg.norm(_marker_residuals(robot, data), axis=-1)
+    return np.linalg.norm(marker_residuals(robot, data), axis=-1)
 
 
-def _marker_residuals(robot: TreeRobot, data: MarkerData) -> np.ndarray:
-    # `(m, 3)` measured − model (m) of every seen marker, in `observations` order.
+def marker_residuals(robot: TreeRobot, data: MarkerData) -> np.ndarray:
+    """`(m, 3)` measured − model (m, measurement frame) of every seen marker, in
+    `observations` order."""
     y, _ = predicted_markers(robot, data)
     rows, markers = data.observations()
     return np.asarray(data.markers)[rows, markers] - y[rows, markers]
@@ -132,7 +134,7 @@ def validate_tree(
         # Early stages leave the effects of later groups in the residuals: their χ² is
         # large by design, and the held-out errors are what a stage reports.
         cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors, warn=False)
-        r = _marker_residuals(cal.robot, test)
+        r = marker_residuals(cal.robot, test)
         e = np.linalg.norm(r, axis=-1) * 1e3
         rows, markers = test.observations()
         named = heldout_gross(r / np.asarray(test.sigma)[rows, None])

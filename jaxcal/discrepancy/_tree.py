@@ -55,7 +55,7 @@ from .._identification.parameter_groups import (
 )
 from .._identification.pivoting import PIVOT_RCOND
 from .._identification.result import Z95
-from .._identification.tree_validation import predicted_markers
+from .._identification.tree_validation import marker_residuals
 from .._markers import MarkerData
 from .._model.tree import TreeRobot
 from ._heldout import press
@@ -213,10 +213,9 @@ def _rms_mm(r: np.ndarray, sigma: np.ndarray) -> float:
 def _linearised(cal: TreeCalibration, data: MarkerData):
     """σ-weighted Jacobian `(3m, P)` (columns in typical sizes), residual `(3m,)`, and
     each observation's row and σ, at the calibration's estimate."""
-    rows, markers = data.observations()
+    rows, _ = data.observations()
     sigma = np.asarray(data.sigma, float)[rows]
-    y, _ = predicted_markers(cal.robot, data)
-    r = (np.asarray(data.markers)[rows, markers] - y[rows, markers]) / sigma[:, None]
+    r = marker_residuals(cal.robot, data) / sigma[:, None]
     J = scaled_jacobian(cal.robot, cal.table, data)
     return J.reshape(-1, J.shape[-1]), r.reshape(-1), rows, sigma
 
