@@ -473,7 +473,7 @@ def test_deflection_data_calibrate_the_tree_as_the_fanuc_form(fanuc, tree_file, 
     assert abs(out["chi2"] - float(ref.chi2_red) * ref.dof) <= 6 * 0.03**2
 
 
-def test_validate_on_deflection_data_stages_the_springs(fanuc, tree_file, tmp_path, capsys):
+def test_validate_on_deflection_data_stages_the_springs(fanuc, tree_file, knocked_off, capsys):
     """`jaxcal validate` on deflection data adds the spring groups in turn (deflections
     do not determine the geometry) and fits the FANUC's six joint springs, nothing
     else: its held-out error is of the order of its training error. The example's
@@ -491,27 +491,36 @@ def test_validate_on_deflection_data_stages_the_springs(fanuc, tree_file, tmp_pa
     for s in stages:
         assert s["held_out_gross"] == [] and s["max_without_gross_mm"] == s["max_mm"], s
     # The same split's training rows (so the same fits), one held-out row knocked off.
-    _, test = split_rows(48, 16, 0)
-    lines = (DATA / "example_calibration.csv").read_text().splitlines()
-    cells = lines[1 + test[3]].split(",")
-    dx = lines[0].split(",").index("dx_mm")
-    cells[dx] = f"{float(cells[dx]) + 0.5:.6f}"
-    lines[1 + test[3]] = ",".join(cells)
-    bad = tmp_path / "bad.csv"
-    bad.write_text("\n".join(lines) + "\n")
+    bad, row = knocked_off
     assert main(["validate", str(bad), *args, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)["stages"]
     for s, c in zip(out, stages, strict=True):
         (g,) = s["held_out_gross"]
-        assert (g["row"], g["marker"]) == (str(test[3] + 1), fanuc[1].marker_names[0]), g
+        assert (g["row"], g["marker"]) == (str(row + 1), fanuc[1].marker_names[0]), g
         assert g["w"] > 20 and abs(g["error_mm"] - 0.5) < 0.1, g
         assert s["max_mm"] == g["error_mm"] and s["max_without_gross_mm"] <= c["max_mm"]
         assert s["mean_mm"] > c["mean_mm"]  # counted in the table
     assert main(["validate", str(bad), *args]) == 0
     assert (
-        f"stand out as gross errors after {out[-1]['added']}: row {test[3] + 1}, marker "
+        f"stand out as gross errors after {out[-1]['added']}: row {row + 1}, marker "
         f"{fanuc[1].marker_names[0]}: {g['error_mm']:.2f} mm (|w| {g['w']:.1f})"
     ) in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def knocked_off(tmp_path_factory):
+    """The example's deflections with one row of the 16 that `--test 16 --seed 0` holds
+    out knocked 0.5 mm (25 σ) off in x: (file, 0-based row)."""
+    _, test = split_rows(48, 16, 0)
+    row = int(test[3])
+    lines = (DATA / "example_calibration.csv").read_text().splitlines()
+    cells = lines[1 + row].split(",")
+    dx = lines[0].split(",").index("dx_mm")
+    cells[dx] = f"{float(cells[dx]) + 0.5:.6f}"
+    lines[1 + row] = ",".join(cells)
+    bad = tmp_path_factory.mktemp("gross") / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    return bad, row
 
 
 def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tree_file, tmp_path, capsys):
@@ -536,16 +545,25 @@ def test_rows_of_a_deflection_pool_are_chosen_for_the_tree(fanuc, tree_file, tmp
     np.testing.assert_allclose(chosen.force, whole.force[rows], atol=1e-6)
 
 
-def test_discover_on_deflection_data_of_the_tree(tree_file, capsys):
-    """`jaxcal discover` on the example's deflections with the FANUC as a tree: its data
-    come from the model itself (the compensator included) with noise, so no candidate
-    is decisive (ΔBIC ≥ 10 on noise alone has probability ~1e-5 per family), as the
-    FANUC-form model's discover answers on the same file. Deflections do not determine
-    the geometry: the nominal model is the spring groups, as for identify; the FANUC's
-    file gives its joints no lateral springs, so those are candidates, not nominal."""
-    args = ["discover", str(DATA / "example_calibration.csv"), "--robot", str(tree_file), "--json"]
-    assert main(args) == 0
+def test_discover_on_deflection_data_of_the_tree(fanuc, tree_file, knocked_off, capsys):
+    """`jaxcal discover` on the example's deflections with the FANUC as a tree, 16 rows
+    held out: its data come from the model itself (the compensator included) with
+    noise, so no candidate is decisive (ΔBIC ≥ 10 on noise alone has probability ~1e-5
+    per family), as the FANUC-form model's discover answers on the same file.
+    Deflections do not determine the geometry: the nominal model is the spring groups,
+    as for identify; the FANUC's file gives its joints no lateral springs, so those are
+    candidates, not nominal. The held-out row knocked off (`knocked_off`) is named as
+    validate names it, and the training rows are validate's: its fits' programs."""
+    bad, row = knocked_off
+    args = ["discover", str(bad), "--robot", str(tree_file), "--test", "16", "--seed", "0"]
+    assert main([*args, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
+    for k in ("before", "after"):
+        held = out["held_out"][k]
+        (g,) = held["held_out_gross"]
+        assert (g["row"], g["marker"]) == (str(row + 1), fanuc[1].marker_names[0]), g
+        assert g["error_mm"] == held["max_mm"], (g, held)
+        assert g["w"] > 20 and held["max_without_gross_mm"] < held["max_mm"], held
     # Fitted from deflections the nominal model is the spring groups, as identify's.
     assert jaxcal.DEFLECTION_GROUPS == ("joint-compliance", "lateral-compliance")
     assert out["nominal_groups"] == ["joint-compliance"]

@@ -8,7 +8,7 @@ import sys
 
 from .._format import format_table
 from .main import check_output_path, output_failed, print_json
-from .tree import load_tree_data
+from .tree import held_out_gross_line, load_tree_data
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -96,7 +96,7 @@ def write_outputs(args: argparse.Namespace, told, write_poses, figure) -> int:
 def run_tree(args: argparse.Namespace) -> int:
     """`jaxcal discover` for a tree robot."""
     from .._identification.parameter_groups import parse_groups
-    from .._identification.tree_validation import marker_errors, split_rows
+    from .._identification.tree_validation import gross_list, held_out, split_rows
     from .._markers import read_markers
     from ..discrepancy._tree import discover_tree
     from ..discrepancy._tree_candidates import (
@@ -151,13 +151,16 @@ def run_tree(args: argparse.Namespace) -> int:
         print(f"jaxcal discover: warning: {line}", file=sys.stderr)
     held = None
     if test is not None:
-        held = {
-            k: (lambda e: {"mean_mm": e.mean(), "std_mm": e.std(), "max_mm": e.max()})(
-                marker_errors(c.robot, test) * 1e3
-            )
-            for k, c in (("before", found.nominal), ("after", found.final))
-        }
-        held = {k: {m: float(x) for m, x in v.items()} for k, v in held.items()}
+        held = {}
+        for k, c in (("before", found.nominal), ("after", found.final)):
+            h = held_out(c.robot, test)
+            held[k] = {
+                "mean_mm": h.mean_mm,
+                "std_mm": h.std_mm,
+                "max_mm": h.max_mm,
+                "held_out_gross": gross_list(h.gross, test, robot.marker_names),
+                "max_without_gross_mm": h.max_kept_mm,
+            }
     if args.json:
         out = found.to_json()
         if held is not None:
@@ -185,6 +188,8 @@ def _print(found, held) -> None:
         for m in ("mean_mm", "std_mm", "max_mm"):
             rows.append([f"held-out {m[:-3]} (mm)", held["before"][m], held["after"][m]])
     print(format_table(["", "nominal", "with the named effects"], rows))
+    if held is not None and held["after"]["held_out_gross"]:
+        print(held_out_gross_line(held["after"], "with the named effects"))
     if found.effects:
         print()
         print(

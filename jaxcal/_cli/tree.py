@@ -260,6 +260,20 @@ def priors_line(priors: dict, table, *, fitted: bool = True) -> str:
     )
 
 
+def held_out_gross_line(held: dict, after: str) -> str:
+    """The line that names the held-out observations standing out as gross errors
+    (`held`: a `held_out_gross`, `max_without_gross_mm` pair of the JSON) in the model
+    `after` some fit."""
+    named = "; ".join(
+        f"row {g['row']}, marker {g['marker']}: {g['error_mm']:.2f} mm (|w| {g['w']:.1f})"
+        for g in held["held_out_gross"]
+    )
+    return (
+        f"held-out observations that stand out as gross errors {after}: {named}. The largest "
+        f"error without them: {held['max_without_gross_mm']:.2f} mm (the table counts them)"
+    )
+
+
 def _row(p: dict, not_determined: dict) -> list:
     if p["ci95"] is not None:
         return [p["name"], p["group"], p["value"], p["std"], *p["ci95"], p["unit"]]

@@ -16,7 +16,7 @@ from .main import (
     priors_of,
     seed,
 )
-from .tree import load_tree_data, priors_line
+from .tree import held_out_gross_line, load_tree_data, priors_line
 
 #: The published Agile Justin results (held-out TCP error, mm: mean, std, max) per
 #: stage: Tenhumberg & Bäuml, Humanoids 2021, table "Calibration results".
@@ -192,17 +192,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if priors:
         print(priors_line(priors, parameter_table(robot, groups)))
-    last = stages[-1]
-    if last["held_out_gross"]:
-        named = "; ".join(
-            f"row {g['row']}, marker {g['marker']}: {g['error_mm']:.2f} mm (|w| {g['w']:.1f})"
-            for g in last["held_out_gross"]
-        )
-        print(
-            f"held-out observations that stand out as gross errors after {last['added']}: "
-            f"{named}. The largest error without them: {last['max_without_gross_mm']:.2f} mm "
-            "(the table counts them)"
-        )
+    if stages[-1]["held_out_gross"]:
+        print(held_out_gross_line(stages[-1], f"after {stages[-1]['added']}"))
     if any(any(f) for s in stages for f in s["not_determined"]):
         print(
             "not det.: fitted springs, masses or spring-law constants whose relative std "

@@ -22,6 +22,9 @@ from .parameter_groups import PriorSpec, default_groups
 from .tree_result import GrossError, TreeCalibration
 
 __all__ = [
+    "HeldOut",
+    "held_out",
+    "gross_list",
     "Stage",
     "split_rows",
     "validate_tree",
@@ -72,11 +75,62 @@ def marker_residuals(robot: TreeRobot, data: MarkerData) -> np.ndarray:
     return np.asarray(data.markers)[rows, markers] - y[rows, markers]
 
 
+class HeldOut(NamedTuple):
+    """A model's 3-D marker errors on held-out data (mm): their `mean_mm`, `std_mm` and
+    `max_mm` over every seen marker; `gross`: the observations that stand out from the
+    others as gross errors (`heldout_gross`; row and marker 0-based in the held-out
+    data, their |w| and 3-D error in m), and `max_kept_mm` the largest error without
+    them (NaN if none is left)."""
+
+    mean_mm: float
+    std_mm: float
+    max_mm: float
+    gross: tuple[GrossError, ...]
+    max_kept_mm: float
+
+
+def held_out(robot: TreeRobot, test: MarkerData) -> HeldOut:
+    """The 3-D marker errors of `robot` on the held-out data `test` (`HeldOut`)."""
+    r = marker_residuals(robot, test)
+    e = np.linalg.norm(r, axis=-1) * 1e3
+    rows, markers = test.observations()
+    named = heldout_gross(r / np.asarray(test.sigma)[rows, None])
+    kept = np.ones(e.size, bool)
+    kept[[i for i, _ in named]] = False
+    return HeldOut(
+        mean_mm=float(e.mean()),
+        std_mm=float(e.std()),
+        max_mm=float(e.max()),
+        gross=tuple(
+            GrossError(int(rows[i]), int(markers[i]), w, float(e[i]) * 1e-3) for i, w in named
+        ),
+        max_kept_mm=float(e[kept].max()) if kept.any() else float("nan"),
+    )
+
+
+def gross_list(
+    gross: tuple[GrossError, ...], test: MarkerData, marker_names: tuple[str, ...]
+) -> list[dict]:
+    """Held-out gross errors as the command line's JSON gives them (row label, marker
+    name, |w|, 3-D error in mm); `test`: the held-out data, `marker_names`: the robot's."""
+    return [
+        {
+            "row": test.label(g.row),
+            "marker": marker_names[g.marker],
+            "w": g.w,
+            "error_mm": g.error * 1e3,
+        }
+        for g in gross
+    ]
+
+
 class Stage(NamedTuple):
     """One row of a validation table: the groups fitted so far, and the held-out 3-D
     marker errors (mm) after fitting them; `not_determined`: the fitted springs, masses
     and spring-law constants the training rows do not determine one by one;
-    `calibration`: the stage's calibration itself (its robot, estimates and stds)."""
+    `calibration`: the stage's calibration itself (its robot, estimates and stds);
+    `gross`, `max_kept_mm`: the held-out gross errors and the largest error without
+    them, as `HeldOut`'s."""
 
     groups: tuple[str, ...]
     mean_mm: float
@@ -92,17 +146,8 @@ class Stage(NamedTuple):
     max_kept_mm: float = float("nan")
 
     def gross_list(self, test: MarkerData, marker_names: tuple[str, ...]) -> list[dict]:
-        """`gross` as the command line's JSON gives it (row label, marker name, |w|, 3-D
-        error in mm); `test`: the held-out data, `marker_names`: the robot's."""
-        return [
-            {
-                "row": test.label(g.row),
-                "marker": marker_names[g.marker],
-                "w": g.w,
-                "error_mm": g.error * 1e3,
-            }
-            for g in self.gross
-        ]
+        """`gross` as the command line's JSON gives it (`gross_list`)."""
+        return gross_list(self.gross, test, marker_names)
 
 
 def split_rows(n: int, test: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -134,29 +179,21 @@ def validate_tree(
         # Early stages leave the effects of later groups in the residuals: their χ² is
         # large by design, and the held-out errors are what a stage reports.
         cal = calibrate_tree(robot, train, groups, fit_groups=groups[:k], priors=priors, warn=False)
-        r = marker_residuals(cal.robot, test)
-        e = np.linalg.norm(r, axis=-1) * 1e3
-        rows, markers = test.observations()
-        named = heldout_gross(r / np.asarray(test.sigma)[rows, None])
-        kept = np.ones(e.size, bool)
-        kept[[i for i, _ in named]] = False
+        h = held_out(cal.robot, test)
         out.append(
             Stage(
                 groups=groups[:k],
-                mean_mm=float(e.mean()),
-                std_mm=float(e.std()),
-                max_mm=float(e.max()),
+                mean_mm=h.mean_mm,
+                std_mm=h.std_mm,
+                max_mm=h.max_mm,
                 train_rms_mm=cal.rms_mm,
                 fitted=int(cal.fitted.sum()),
                 converged=cal.converged,
                 seconds=cal.seconds,
                 not_determined=cal.not_determined,
                 calibration=cal,
-                gross=tuple(
-                    GrossError(int(rows[i]), int(markers[i]), w, float(e[i]) * 1e-3)
-                    for i, w in named
-                ),
-                max_kept_mm=float(e[kept].max()) if kept.any() else float("nan"),
+                gross=h.gross,
+                max_kept_mm=h.max_kept_mm,
             )
         )
         if progress is not None:
