@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcal
-from jaxcal.internal import critical_w, data_snooping, marker_w, w_statistics
+from jaxcal.internal import critical_w, data_snooping, heldout_gross, marker_w, w_statistics
 
 
 def _hat(X: np.ndarray) -> np.ndarray:
@@ -72,3 +72,26 @@ def test_a_row_whose_exclusion_loses_a_parameter_is_not_named():
         data_snooping(res, data, X, refit, exclude=True)
     sigma = e.value.args[0]
     assert sigma[0] > 1e3 * sigma[1] and np.all(sigma[1:] == sigma[1])
+
+
+def test_held_out_gross_errors_are_named_in_the_errors_own_scale():
+    """Held-out prediction errors of 400 markers whose σ is stated 2x too small (as on
+    real data): none is named (the errors' robust scale, about 2, replaces the stated
+    1; a false alarm has probability ≤ 0.1 % by the Bonferroni bound, this draw is
+    fixed). Two knocked 20 and 12 (true) σ off are named, the larger first, each |w| in
+    the robust scale of the markers not yet named; at most a tenth of the markers."""
+    rng = np.random.default_rng(3)
+    z = rng.normal(scale=2.0, size=(400, 3))
+    assert heldout_gross(z) == []
+    z[17, 1] = 20.0 * 2
+    z[230, 2] = -12.0 * 2
+    named = heldout_gross(z)
+    assert [i for i, _ in named] == [17, 230], named
+    for k, (i, w) in enumerate(named):
+        scale = 1.482602218505602 * np.median(np.abs(np.delete(z, [17][:k], axis=0)))
+        assert 1.8 < scale < 2.2
+        assert w == pytest.approx(np.abs(z[i]).max() / scale, rel=1e-12), (i, w)
+        assert w > critical_w(3 * 400)
+    # Sixty markers far off (a data set wrong as a whole): no more than a tenth named.
+    z[:60, 0] += 1e3
+    assert len(heldout_gross(z)) == 40

@@ -25,6 +25,7 @@ from .._identification.elastogeometric import (
 from .._identification.gross import (
     critical_w as critical_w,
     data_snooping as data_snooping,
+    heldout_gross as heldout_gross,
     marker_w as marker_w,
     w_statistics as w_statistics,
 )
