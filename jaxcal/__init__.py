@@ -63,7 +63,9 @@ from ._identification.tree_result import (
     TreeCalibration as TreeCalibration,
 )
 from ._identification.tree_validation import (
+    HeldOut as HeldOut,
     Stage as Stage,
+    held_out as held_out,
     marker_errors as marker_errors,
     predicted_markers as predicted_markers,
     validate_tree as validate_tree,

@@ -914,6 +914,10 @@ def test_nominal_model_reproduces_published_error(justin, data):
         warnings.simplefilter("error")
         (stage,) = jaxcal.validate_tree(justin, data.subset(train), data.subset(test), ("frames",))
     assert stage.mean_mm == pytest.approx(float(e.mean()), rel=1e-9)
+    h = jaxcal.held_out(cal.robot, data.subset(test))
+    assert (h.mean_mm, h.max_mm) == pytest.approx((e.mean(), e.max()), rel=1e-12)
+    # Against a model 20 mm off everywhere, no single observation stands out.
+    assert h.gross == stage.gross == () and h.max_kept_mm == h.max_mm
 
 
 def test_cli_identify_simulate_round_trip(identified, tmp_path):
