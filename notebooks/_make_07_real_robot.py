@@ -215,7 +215,10 @@ cells = [
         "The held-out errors of the nominal robot with only the measurement frames "
         "fitted, and after the full calibration: the first and last stage of "
         "`validate_tree`, whose `Stage.calibration` is the `jaxcal.calibrate_tree` "
-        "result of that stage (the call `jaxcal identify` makes for a tree robot).",
+        "result of that stage (the call `jaxcal identify` makes for a tree robot). "
+        "The last line says whether the largest held-out error is one that the "
+        "gross-error test names (`Stage.gross`, as `jaxcal validate` prints it below its "
+        "table) or the model's own.",
     ),
     (
         "code",
@@ -229,7 +232,12 @@ cells = [
         "after = jaxcal.marker_errors(cal.robot, test) * 1e3\n"
         "for label, e, s in (('before', before, stages[0]), ('after', after, stages[-1])):\n"
         "    print(f'{label:6s} held-out mean {e.mean():6.2f}  std {e.std():5.2f}  max {e.max():6.2f} mm '\n"
-        "          f'(table: {s.mean_mm:.2f} / {s.std_mm:.2f} / {s.max_mm:.2f})')",
+        "          f'(table: {s.mean_mm:.2f} / {s.std_mm:.2f} / {s.max_mm:.2f})')\n"
+        "# Is the largest held-out error the data's (a gross error, named by the test identify\n"
+        "# applies to its data) or the model's?\n"
+        "named = stages[-1].gross_list(test, robot.marker_names)\n"
+        "print('held-out gross errors after the full calibration:', named or 'none named',\n"
+        "      f'(max without them {stages[-1].max_kept_mm:.2f} mm)')",
     ),
     (
         "code",
